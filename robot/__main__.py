@@ -1,0 +1,5 @@
+"""``python -m robot``: the sonarslam command line."""
+
+from robot.cli import main
+
+raise SystemExit(main())

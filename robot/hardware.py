@@ -1,0 +1,79 @@
+"""The hardware seam: everything the SLAM side may touch, implemented by the simulator and the Pi backend.
+
+The SLAM code receives only what real hardware gives: sonar ranges, cumulative encoder counts,
+IMU samples and a clock. Nothing here exposes a world or a true pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True)
+class SonarSweep:
+    """One reading from every sonar, in mounting order (index i = ``RobotConfig.sonars[i]``).
+
+    A range at or above the sonar model's ``max_range_m`` means "no echo".
+    """
+
+    t_s: float  # clock time when the sweep finished [s]
+    ranges_m: NDArray[np.float64]  # shape (n_sonars,) [m]
+
+
+@dataclass(frozen=True)
+class EncoderCounts:
+    """Cumulative signed encoder counts since start; positive = wheel driving forward."""
+
+    t_s: float  # [s]
+    left: int
+    right: int
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    """One IMU sample in the robot frame (x forward, y left, z up)."""
+
+    t_s: float  # [s]
+    gyro_z_rad_s: float  # yaw rate, counter-clockwise positive [rad/s]
+    accel_x_m_s2: float = 0.0
+    accel_y_m_s2: float = 0.0
+
+
+@runtime_checkable
+class Hardware(Protocol):
+    """A robot the SLAM loop can drive. The clock belongs to the hardware, so a simulator can run
+    faster than real time while the Pi backend sleeps for real."""
+
+    def now(self) -> float:
+        """Current clock time [s]."""
+        ...
+
+    def sleep(self, duration_s: float) -> None:
+        """Let ``duration_s`` of clock time pass (wheels keep their last command)."""
+        ...
+
+    def read_sonar_sweep(self) -> SonarSweep:
+        """Fire every sonar once in the configured order; takes clock time."""
+        ...
+
+    def read_encoders(self) -> EncoderCounts: ...
+
+    def read_imu(self) -> list[ImuSample]:
+        """Every IMU sample taken since the previous call, oldest first."""
+        ...
+
+    def set_wheel_speeds(self, left_m_s: float, right_m_s: float) -> None:
+        """Command wheel rim speeds [m/s]; values beyond the robot's maximum are clipped."""
+        ...
+
+    def stop(self) -> None:
+        """Stop both wheels now."""
+        ...
+
+    def close(self) -> None:
+        """Stop the wheels and release the devices; safe to call twice."""
+        ...
