@@ -1,0 +1,198 @@
+"""SimRobot: a differential-drive robot in a World, implementing the Hardware seam.
+
+Physics runs in fixed ticks of one IMU period. A constant wheel command over a sleep is integrated
+for all its ticks at once with numpy. The true pose is available to the test harness and the
+scorer through ``true_pose``; the SLAM side only ever sees the Hardware methods.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robot.config import RobotConfig, SimNoise
+from robot.hardware import EncoderCounts, ImuSample, SonarSweep
+from robot.sim.sonar import cone_candidates, simulate_ranges
+from robot.world import Pose, World
+
+
+def _point_segment_distance(
+    px: NDArray[np.float64], py: NDArray[np.float64], segs: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Distance (K,) from each point to the nearest of the segments (S, 4)."""
+    ax = segs[None, :, 0]
+    ay = segs[None, :, 1]
+    dx = segs[None, :, 2] - ax
+    dy = segs[None, :, 3] - ay
+    rx = px[:, None] - ax
+    ry = py[:, None] - ay
+    t = np.clip((rx * dx + ry * dy) / np.maximum(dx * dx + dy * dy, 1e-18), 0.0, 1.0)
+    return np.hypot(rx - t * dx, ry - t * dy).min(axis=1)
+
+
+class SimRobot:
+    """The simulated robot. ``speed`` paces the clock against wall time (None runs flat out)."""
+
+    def __init__(
+        self,
+        world: World,
+        robot: RobotConfig,
+        noise: SimNoise,
+        seed: int = 0,
+        speed: float | None = None,
+    ) -> None:
+        self.world = world
+        self.robot = robot
+        self.noise = noise
+        self.speed = speed
+        self._rng = np.random.default_rng(seed)
+        self._segments = world.segments
+        self._dt = 1.0 / robot.imu.rate_hz  # physics tick = IMU period [s]
+        self._t = 0.0  # sim clock [s]
+        self._x, self._y, self._theta = world.start.x, world.start.y, world.start.theta
+        self._cmd = (0.0, 0.0)  # commanded rim speeds [m/s]
+        self._wheel_angle = np.zeros(2)  # left, right [rad], cumulative
+        self._radius_true = robot.wheel_radius_m * np.array(
+            [1.0 + noise.wheel_radius_error_left, 1.0 + noise.wheel_radius_error_right]
+        )
+        self._gyro_bias = noise.gyro_bias_rad_s
+        self._imu_t: list[NDArray[np.floating]] = []
+        self._imu_w: list[NDArray[np.floating]] = []
+        self._closed = False
+        self.collisions = 0  # ticks in which the body hit something
+        self.odometer_m = 0.0  # true distance travelled [m]
+        self._wall_anchor: tuple[float, float] | None = None
+        mounts = robot.sonars
+        self._mount_xy = np.array([[m.offset_x_m, m.offset_y_m] for m in mounts])
+        self._mount_bearing = np.radians([m.bearing_deg for m in mounts])
+        self._half_beam = math.radians(robot.sonar.beam_width_deg) / 2.0
+
+    # -- simulator-only views (never handed to the SLAM side) --------------------------------
+    @property
+    def true_pose(self) -> Pose:
+        return Pose(self._x, self._y, self._theta)
+
+    # -- Hardware seam ----------------------------------------------------------------------
+    def now(self) -> float:
+        return self._t
+
+    def set_wheel_speeds(self, left_m_s: float, right_m_s: float) -> None:
+        vmax = self.robot.max_wheel_speed_m_s
+        self._cmd = (float(np.clip(left_m_s, -vmax, vmax)), float(np.clip(right_m_s, -vmax, vmax)))
+
+    def stop(self) -> None:
+        self._cmd = (0.0, 0.0)
+
+    def close(self) -> None:
+        self.stop()
+        self._closed = True
+
+    def read_encoders(self) -> EncoderCounts:
+        counts = np.floor(self._wheel_angle / (2.0 * math.pi) * self.robot.encoder_counts_per_rev)
+        return EncoderCounts(self._t, int(counts[0]), int(counts[1]))
+
+    def read_imu(self) -> list[ImuSample]:
+        if not self._imu_t:
+            return []
+        ts = np.concatenate(self._imu_t)
+        ws = np.concatenate(self._imu_w)
+        self._imu_t.clear()
+        self._imu_w.clear()
+        return [ImuSample(float(t), float(w)) for t, w in zip(ts, ws, strict=True)]
+
+    def read_sonar_sweep(self) -> SonarSweep:
+        n = len(self.robot.sonars)
+        ranges = np.empty(n)
+        if self._cmd == (0.0, 0.0):
+            # Standing still: every ping sees the same pose, so cast them all at once.
+            ranges[:] = self._ping(np.arange(n))
+            self.sleep(self.robot.sonar.ping_interval_s * n)
+        else:
+            for i in self.robot.sonar.firing_order:
+                self.sleep(self.robot.sonar.ping_interval_s)
+                ranges[i] = self._ping(np.array([i]))[0]
+        return SonarSweep(self._t, ranges)
+
+    def sleep(self, duration_s: float) -> None:
+        if duration_s <= 0:
+            return
+        self._pace(duration_s)
+        ticks = max(1, int(round(duration_s / self._dt)))
+        self._advance(ticks, duration_s / ticks)
+
+    # -- internals ------------------------------------------------------------------------------
+    def _pace(self, duration_s: float) -> None:
+        if not self.speed:
+            self._wall_anchor = None
+            return
+        now_wall = time.monotonic()
+        if self._wall_anchor is None:
+            self._wall_anchor = (now_wall, self._t)
+        wall0, sim0 = self._wall_anchor
+        due = wall0 + (self._t + duration_s - sim0) / self.speed
+        if due > now_wall:
+            time.sleep(due - now_wall)
+
+    def set_speed(self, speed: float | None) -> None:
+        """Change the real-time factor live (None = as fast as possible)."""
+        self.speed = speed
+        self._wall_anchor = None
+
+    def _ping(self, idx: NDArray[np.int64]) -> NDArray[np.float64]:
+        c, s = math.cos(self._theta), math.sin(self._theta)
+        mxy = self._mount_xy[idx]
+        origins = np.column_stack([self._x + c * mxy[:, 0] - s * mxy[:, 1], self._y + s * mxy[:, 0] + c * mxy[:, 1]])
+        bearings = self._theta + self._mount_bearing[idx]
+        dist, inc = cone_candidates(self._segments, origins, bearings, self._half_beam)
+        return simulate_ranges(dist, inc, self.robot.sonar, self.noise, self._rng)
+
+    def _advance(self, ticks: int, dt: float) -> None:
+        noise = self.noise
+        rng = self._rng
+        omega = np.array(self._cmd) / self.robot.wheel_radius_m  # wheel spin rates [rad/s]
+        moving = bool(np.any(omega != 0.0))
+        if moving:
+            slip = (
+                1.0 + noise.wheel_slip_std * rng.standard_normal((ticks, 2))
+                if noise.wheel_slip_std
+                else np.ones((ticks, 2))
+            )
+            ground = omega[None, :] * dt * self._radius_true[None, :] * slip  # (ticks, 2) wheel travel [m]
+            ds = ground.mean(axis=1)
+            dtheta = (ground[:, 1] - ground[:, 0]) / self.robot.wheel_base_m
+            theta_end = self._theta + np.cumsum(dtheta)
+            theta_mid = theta_end - dtheta / 2.0
+            xs = self._x + np.cumsum(ds * np.cos(theta_mid))
+            ys = self._y + np.cumsum(ds * np.sin(theta_mid))
+            ok = ticks
+            if np.any(ds != 0.0):
+                clearance = _point_segment_distance(xs, ys, self._segments)
+                hit = np.flatnonzero(clearance < self.robot.radius_m)
+                if hit.size:
+                    ok = int(hit[0])  # the body stops at the last free tick; the wheels stall
+                    self.collisions += ticks - ok
+            rate = dtheta / dt
+            if ok < ticks:
+                rate[ok:] = 0.0
+            if ok > 0:
+                self._x, self._y, self._theta = float(xs[ok - 1]), float(ys[ok - 1]), float(theta_end[ok - 1])
+                self._theta = math.atan2(math.sin(self._theta), math.cos(self._theta))
+                self._wheel_angle += omega * dt * ok
+                self.odometer_m += float(np.abs(ds[:ok]).sum())
+        else:
+            rate = np.zeros(ticks)
+        # Gyro: true yaw rate + slowly wandering bias + white noise, one sample per tick.
+        walk = (
+            noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * rng.standard_normal(ticks)
+            if noise.gyro_bias_walk_rad_s2
+            else np.zeros(ticks)
+        )
+        bias = self._gyro_bias + np.cumsum(walk)
+        self._gyro_bias = float(bias[-1])
+        white = noise.gyro_noise_std_rad_s * rng.standard_normal(ticks) if noise.gyro_noise_std_rad_s else 0.0
+        self._imu_t.append(self._t + dt * np.arange(1, ticks + 1))
+        self._imu_w.append(rate + bias + white)
+        self._t += dt * ticks
