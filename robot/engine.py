@@ -1,0 +1,235 @@
+"""The step engine: the paper's Algorithms 1 and 2 on the hardware seam.
+
+Each ``step()`` chooses the next navigation move (Algorithm 1), executes it closed-loop on the
+dead-reckoning estimate, sweeps the sonars, updates the map (Algorithm 2) and returns the new pose
+estimate with the map cells whose exported state changed. No asyncio and no I/O happen here.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robot.config import RobotConfig
+from robot.explore import Action, Explorer
+from robot.hardware import Hardware
+from robot.localization import DeadReckoning, PoseEstimate
+from robot.mapping import make_mapper
+from robot.mapping.base import MapFrame
+from robot.motion import Pilot
+from robot.slam_config import SlamConfig
+from robot.truth import reachable_cells, truth_states
+from robot.world import Pose
+
+
+@dataclass
+class StepResult:
+    step: int
+    t_s: float  # clock time at the end of the step [s]
+    pose: PoseEstimate  # estimated pose, map frame
+    action: str  # "start", "explore", "backtrack", "revisit", "frontier", "inspect", "done"
+    target_xy: tuple[float, float] | None  # where the robot was heading [m]
+    changed_rows: NDArray[np.int64]
+    changed_cols: NDArray[np.int64]
+    changed_states: NDArray[np.int8]
+    sweep_ranges_m: NDArray[np.float64] | None
+    frontier_cells: int
+    done: bool = False
+    terminated_by: str | None = None
+    moved_ok: bool = True
+
+
+@dataclass
+class EngineStats:
+    steps: int = 0
+    moves: int = 0
+    failed_moves: int = 0
+    sweeps: int = 0
+    last_change_t: float = 0.0
+    terminated_by: str | None = None
+    actions: dict[str, int] = field(default_factory=dict)
+
+
+def classify(belief: NDArray[np.int8], start_cell: tuple[int, int]) -> NDArray[np.int8]:
+    """The exported map: the belief read the way the ground truth is defined (SPEC §2).
+
+    White = believed-free cells reachable from the start; black = cells that are not believed free
+    and touch that area (occupied, or unknown next to explored space, which is treated as blocked);
+    grey = everything else.
+    """
+    blocked = belief != 0
+    reach = reachable_cells(blocked, *start_cell)
+    return truth_states(blocked, reach)
+
+
+class SlamEngine:
+    """Explores with the robot behind ``hw`` and builds the map. Knows nothing of any world."""
+
+    def __init__(
+        self,
+        hw: Hardware,
+        robot: RobotConfig,
+        config: SlamConfig,
+        frame: MapFrame,
+        on_tick: Callable[[PoseEstimate], None] | None = None,
+    ) -> None:
+        config.check_robot(robot)
+        self.hw = hw
+        self.robot = robot
+        self.config = config
+        self.frame = frame
+        self.mapper = make_mapper(config.mapper, frame, robot, config)
+        self.dead_reckoning = DeadReckoning(robot, frame.start, config.localization)
+        self._user_tick = on_tick
+        self._last_body_xy = (frame.start.x, frame.start.y)
+        self.pilot = Pilot(hw, robot, self.dead_reckoning, config.motion, on_tick=self._on_tick)
+        block = config.nav_block(robot)
+        self.explorer = Explorer(frame.grid, block, (0, 0), max_inspections=config.max_inspections)
+        self.explorer.start_cell = self.explorer.nav_cell_of(frame.start.x, frame.start.y)
+        self.stats = EngineStats(last_change_t=hw.now())
+        self._exported = frame.grid.empty()
+        self._started = False
+        self.last_sweep: NDArray[np.float64] | None = None
+        self.done = False
+
+    # -- state ---------------------------------------------------------------------------------
+    @property
+    def pose(self) -> PoseEstimate:
+        return self.dead_reckoning.estimate
+
+    def map_states(self) -> NDArray[np.int8]:
+        """The exported black / white / grey map as of the last step."""
+        return self._exported.copy()
+
+    def belief(self) -> NDArray[np.int8]:
+        return self.mapper.states()
+
+    # -- internals -----------------------------------------------------------------------------
+    def _on_tick(self, est: PoseEstimate) -> None:
+        # The body clears the floor it drives over; marking every few centimetres is enough.
+        if math.hypot(est.x - self._last_body_xy[0], est.y - self._last_body_xy[1]) >= 0.03:
+            self.mapper.mark_body(est.as_pose())
+            self._last_body_xy = (est.x, est.y)
+        if self._user_tick is not None:
+            self._user_tick(est)
+
+    def _sweep(self) -> None:
+        sweep, est = self.pilot.sweep()
+        self.mapper.integrate(est.as_pose(), sweep.ranges_m)
+        self.mapper.mark_body(est.as_pose())
+        self.last_sweep = sweep.ranges_m
+        self.stats.sweeps += 1
+
+    def _go_to(self, cell: tuple[int, int]) -> bool:
+        x, y = self.explorer.nav_center(cell)
+        est = self.pose
+        if math.hypot(x - est.x, y - est.y) > 1e-3:
+            heading = math.atan2(y - est.y, x - est.x)
+            # Turns are in multiples of 45 degrees, as in the paper.
+            heading = round(heading / (math.pi / 4)) * (math.pi / 4)
+            turned = self.pilot.turn_to(heading)
+            if not turned.ok:
+                return False
+            moved = self.pilot.drive_to(x, y)
+            if not moved.ok:
+                self.mapper.mark_contact(moved.pose.as_pose(), heading)
+                return False
+        return True
+
+    def _recover(self, home: tuple[int, int]) -> None:
+        """After a failed move, return to the centre of the cell the move started from."""
+        x, y = self.explorer.nav_center(home)
+        est = self.pose
+        if math.hypot(x - est.x, y - est.y) > 0.01:
+            heading = math.atan2(y - est.y, x - est.x)
+            if self.pilot.turn_to(heading).ok:
+                self.pilot.drive_to(x, y)
+
+    def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
+        exported = classify(self.mapper.states(), self.frame.start_cell)
+        changed = np.nonzero(exported != self._exported)
+        if changed[0].size:
+            self.stats.last_change_t = self.hw.now()
+        self._exported = exported
+        frontier = int(self.explorer.frontier(self.mapper.states(), self.mapper.passable()).sum())
+        return StepResult(
+            step=self.stats.steps,
+            t_s=self.hw.now(),
+            pose=self.pose,
+            action=step_action,
+            target_xy=target_xy,
+            changed_rows=changed[0].astype(np.int64),
+            changed_cols=changed[1].astype(np.int64),
+            changed_states=exported[changed],
+            sweep_ranges_m=self.last_sweep,
+            frontier_cells=frontier,
+            moved_ok=ok,
+        )
+
+    def _finish(self, result: StepResult, reason: str) -> StepResult:
+        self.hw.stop()
+        self.done = True
+        self.stats.terminated_by = reason
+        result.done = True
+        result.terminated_by = reason
+        return result
+
+    # -- Algorithm 1 --------------------------------------------------------------------------
+    def step(self) -> StepResult:
+        """One step: decide, move, sweep, map. Returns the pose and the changed cells."""
+        if self.done:
+            raise RuntimeError("the run has finished")
+        self.stats.steps += 1
+        if not self._started:
+            self._started = True
+            self.mapper.mark_body(self.frame.start)
+            self._sweep()
+            start_nav = self.explorer.start_cell
+            ok = self._go_to(start_nav)
+            self._sweep()
+            return self._refresh("start", self.explorer.nav_center(start_nav), ok)
+
+        est = self.pose
+        current = self.explorer.nav_cell_of(est.x, est.y)
+        action: Action = self.explorer.decide(current, est.theta, self.mapper.states(), self.mapper.passable())
+        self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
+        ok = True
+        target_xy = None
+        if action.kind == "move" and action.target is not None:
+            target_xy = self.explorer.nav_center(action.target)
+            self.stats.moves += 1
+            ok = self._go_to(action.target)
+            if not ok:
+                self.stats.failed_moves += 1
+                self.explorer.bumped[action.target] = True
+                self._recover(current)
+            self._sweep()
+            result = self._refresh(action.reason, target_xy, ok)
+        elif action.kind == "inspect" and action.heading_rad is not None:
+            self.pilot.turn_to(action.heading_rad)
+            self._sweep()
+            result = self._refresh("inspect", None, True)
+        else:
+            result = self._refresh("done", None, True)
+            return self._finish(result, action.reason or "complete")
+
+        now = self.hw.now()
+        if now - self.stats.last_change_t > self.config.time_limit_s:
+            return self._finish(result, "time_limit")
+        if self.stats.steps >= self.config.max_steps or now >= self.config.max_sim_time_s:
+            return self._finish(result, "safety_cap")
+        return result
+
+    def stop(self, reason: str = "stopped") -> None:
+        """End the run early; the map so far is kept."""
+        self.hw.stop()
+        self.done = True
+        self.stats.terminated_by = reason
+
+
+def start_pose_frame(grid_frame: MapFrame) -> Pose:
+    return grid_frame.start

@@ -1,0 +1,197 @@
+"""BOB-style exploration: one navigation cell per step, clockwise neighbour priority, backtracking.
+
+The navigation grid is the map grid coarsened so that one navigation cell holds the robot and its
+turning circle. A navigation cell is traversable when every map cell in it is believed free. When
+the depth-first search runs out, the explorer plans (breadth-first, over known traversable cells) to
+unvisited traversable cells, then to spots next to remaining frontier cells (unknown cells touching
+the reachable free area), which it inspects a bounded number of times before accepting them as
+blocked.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robot.grid import UNKNOWN, GridSpec
+from robot.truth import dilate8, reachable_cells
+
+# Neighbour offsets (drow, dcol) clockwise from "north" (+y, which is row - 1).
+CLOCKWISE = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))
+
+
+def direction_index(theta_rad: float) -> int:
+    """Index into CLOCKWISE of the 45-degree direction nearest to a heading."""
+    # Heading 90 deg (north) -> 0, 45 deg (north-east) -> 1, 0 deg (east) -> 2, ...
+    return int(round((math.pi / 2 - theta_rad) / (math.pi / 4))) % 8
+
+
+def direction_heading(index: int) -> float:
+    return math.atan2(math.sin(math.pi / 2 - index * math.pi / 4), math.cos(math.pi / 2 - index * math.pi / 4))
+
+
+@dataclass
+class Action:
+    kind: str  # "move", "inspect", "done"
+    target: tuple[int, int] | None = None  # navigation cell to move to
+    heading_rad: float | None = None  # for "inspect": face this way and sweep
+    reason: str = ""  # "explore", "backtrack", "revisit", "frontier", or for done: terminated_by
+
+
+@dataclass
+class Explorer:
+    grid: GridSpec  # the map grid
+    block: int  # map cells per navigation cell side
+    start_cell: tuple[int, int]  # navigation cell of the start
+    max_inspections: int = 2
+    visited: NDArray[np.bool_] = field(init=False)
+    bumped: NDArray[np.bool_] = field(init=False)
+    stack: list[tuple[int, int]] = field(default_factory=list)
+    inspections: dict[tuple[int, int], int] = field(default_factory=dict)  # map cell -> count
+    given_up: set[tuple[int, int]] = field(default_factory=set)
+    plan_goal: tuple[int, int] | None = None
+
+    def __post_init__(self) -> None:
+        self.nav_rows = -(-self.grid.rows // self.block)
+        self.nav_cols = -(-self.grid.cols // self.block)
+        self.visited = np.zeros((self.nav_rows, self.nav_cols), dtype=bool)
+        self.bumped = np.zeros_like(self.visited)
+
+    # -- geometry -------------------------------------------------------------------------------
+    def nav_center(self, cell: tuple[int, int]) -> tuple[float, float]:
+        """World (x, y) of a navigation cell's centre; its first map row is the top one."""
+        g = self.grid
+        b = self.block
+        r, c = cell
+        x = g.origin_x + (c * b + b / 2) * g.resolution
+        top_y = g.origin_y + (g.rows - r * b) * g.resolution
+        return x, top_y - b / 2 * g.resolution
+
+    def nav_cell_of(self, x: float, y: float) -> tuple[int, int]:
+        g = self.grid
+        b = self.block
+        col = math.floor((x - g.origin_x) / (g.resolution * b))
+        row = math.floor((g.origin_y + g.rows * g.resolution - y) / (g.resolution * b))
+        return int(row), int(col)
+
+    def traversable(self, passable: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Navigation cells whose map cells are all passable (cells past the grid count as walls)."""
+        b = self.block
+        padded = np.full((self.nav_rows * b, self.nav_cols * b), False)
+        padded[: self.grid.rows, : self.grid.cols] = passable
+        ok = padded.reshape(self.nav_rows, b, self.nav_cols, b).all(axis=(1, 3))
+        return ok & ~self.bumped
+
+    # -- decisions -------------------------------------------------------------------------------
+    def _can_step(self, trav: NDArray[np.bool_], cell: tuple[int, int], d: tuple[int, int]) -> bool:
+        r, c = cell[0] + d[0], cell[1] + d[1]
+        if not (0 <= r < self.nav_rows and 0 <= c < self.nav_cols) or not trav[r, c]:
+            return False
+        if d[0] != 0 and d[1] != 0:  # a diagonal needs both orthogonal neighbours clear
+            return bool(trav[cell[0] + d[0], cell[1]] and trav[cell[0], cell[1] + d[1]])
+        return True
+
+    def frontier(self, states: NDArray[np.int8], passable: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Unresolved map cells (neither free nor occupied) in or next to the area the robot can reach."""
+        open_cells = passable | self._visited_map_cells()
+        reach = reachable_cells(~open_cells, *self._start_map_cell())
+        front = (states == UNKNOWN) & dilate8(reach)
+        for cell in self.given_up:
+            front[cell] = False
+        return front
+
+    def _visited_map_cells(self) -> NDArray[np.bool_]:
+        b = self.block
+        full = np.repeat(np.repeat(self.visited, b, axis=0), b, axis=1)
+        return full[: self.grid.rows, : self.grid.cols]
+
+    def _start_map_cell(self) -> tuple[int, int]:
+        b = self.block
+        r = min(self.start_cell[0] * b + b // 2, self.grid.rows - 1)
+        c = min(self.start_cell[1] * b + b // 2, self.grid.cols - 1)
+        return r, c
+
+    def decide(
+        self, current: tuple[int, int], heading_rad: float, states: NDArray[np.int8], passable: NDArray[np.bool_]
+    ) -> Action:
+        """The next action from navigation cell ``current`` facing ``heading_rad``."""
+        self.visited[current] = True
+        trav = self.traversable(passable)
+        trav[current] = True  # the robot is standing in it
+        first = direction_index(heading_rad)
+        for k in range(8):
+            d = CLOCKWISE[(first + k) % 8]
+            nxt = (current[0] + d[0], current[1] + d[1])
+            if self._can_step(trav, current, d) and not self.visited[nxt]:
+                self.stack.append(current)
+                self.plan_goal = None
+                return Action("move", nxt, reason="explore")
+        while self.stack:
+            prev = self.stack.pop()
+            if prev != current and max(abs(prev[0] - current[0]), abs(prev[1] - current[1])) == 1:
+                d = (prev[0] - current[0], prev[1] - current[1])
+                if self._can_step(trav, current, d):
+                    return Action("move", prev, reason="backtrack")
+            elif prev == current:
+                continue
+            # The stack entry is no longer adjacent (after a detour): plan a path to it instead.
+            self.stack.append(prev)
+            break
+        return self._plan(current, trav, states, passable)
+
+    def _plan(
+        self, current: tuple[int, int], trav: NDArray[np.bool_], states: NDArray[np.int8], passable: NDArray[np.bool_]
+    ) -> Action:
+        """Breadth-first search over traversable cells for the nearest useful goal."""
+        front = self.frontier(states, passable)
+        inspect_spots = self._inspection_spots(front)
+        stack_top = self.stack[-1] if self.stack else None
+        parent: dict[tuple[int, int], tuple[int, int]] = {current: current}
+        queue = deque([current])
+        while queue:
+            cell = queue.popleft()
+            goal_here = (cell != current and not self.visited[cell]) or cell == stack_top
+            inspect_here = cell in inspect_spots
+            if goal_here or (inspect_here and cell != current):
+                step = cell
+                while parent[step] != current:
+                    step = parent[step]
+                if cell == stack_top and step == cell:
+                    self.stack.pop()
+                return Action("move", step, reason="revisit" if goal_here else "frontier")
+            if inspect_here and cell == current:
+                target = inspect_spots[cell]
+                self.inspections[target] = self.inspections.get(target, 0) + 1
+                if self.inspections[target] >= self.max_inspections:
+                    self.given_up.add(target)
+                return Action("inspect", heading_rad=self._heading_to(current, target), reason="frontier")
+            for d in CLOCKWISE:
+                nxt = (cell[0] + d[0], cell[1] + d[1])
+                if nxt not in parent and self._can_step(trav, cell, d):
+                    parent[nxt] = cell
+                    queue.append(nxt)
+        # Nothing reachable is left to do: frontier cells nobody can get next to are given up.
+        self.given_up.update(zip(*np.nonzero(front), strict=True))
+        return Action("done", reason="complete")
+
+    def _inspection_spots(self, front: NDArray[np.bool_]) -> dict[tuple[int, int], tuple[int, int]]:
+        """Navigation cells next to a frontier map cell, mapped to that cell."""
+        spots: dict[tuple[int, int], tuple[int, int]] = {}
+        b = self.block
+        for r, c in zip(*np.nonzero(front), strict=True):
+            nav = (int(r) // b, int(c) // b)
+            for d in ((0, 0), *CLOCKWISE):
+                spot = (nav[0] + d[0], nav[1] + d[1])
+                if 0 <= spot[0] < self.nav_rows and 0 <= spot[1] < self.nav_cols and self.visited[spot]:
+                    spots.setdefault(spot, (int(r), int(c)))
+        return spots
+
+    def _heading_to(self, nav: tuple[int, int], map_cell: tuple[int, int]) -> float:
+        x0, y0 = self.nav_center(nav)
+        x1, y1 = self.grid.index_to_world(map_cell[0], map_cell[1])
+        raw = math.atan2(float(y1) - y0, float(x1) - x0)
+        return direction_heading(direction_index(raw))

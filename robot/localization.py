@@ -1,0 +1,138 @@
+"""Dead reckoning: a linear Kalman filter fusing gyro and encoder yaw rates, plus encoder odometry.
+
+State ``[theta, omega, bias]``: heading [rad], yaw rate [rad/s], gyro bias [rad/s]. Measurements are
+the mean gyro rate over a tick (which sees ``omega + bias``) and the encoder yaw rate (which sees
+``omega``). When the wheels have not turned, a zero-rate pseudo-measurement pins omega, which makes
+the bias observable. When the gyro and the encoders disagree by more than the encoders' quantisation
+explains (slip, bumps), the encoder variance is inflated: Borenstein & Feng's gyrodometry.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+from pydantic import BaseModel, ConfigDict, Field
+
+from robot.config import RobotConfig
+from robot.hardware import EncoderCounts, ImuSample
+from robot.world import Pose
+
+
+class LocalizationConfig(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    gyro_noise_std_rad_s: float = Field(default=0.003, gt=0.0)  # per IMU sample
+    yaw_rate_jump_std_rad_s: float = Field(default=2.0, gt=0.0)  # how much omega may change between ticks
+    bias_walk_std_rad_s2: float = Field(default=0.0005, gt=0.0)  # process noise on the bias
+    initial_bias_std_rad_s: float = Field(default=0.05, gt=0.0)
+    zero_rate_std_rad_s: float = Field(default=0.0005, gt=0.0)  # wheels still => omega ~ 0
+    slip_gate_sigma: float = Field(default=3.0, gt=0.0)  # disagreement that counts as slip [std-devs]
+    slip_inflation: float = Field(default=100.0, ge=1.0)  # encoder variance factor under slip
+
+
+@dataclass
+class PoseEstimate:
+    x: float  # [m], map frame
+    y: float  # [m]
+    theta: float  # [rad]
+    theta_std: float  # [rad]
+    bias: float  # estimated gyro bias [rad/s]
+
+    def as_pose(self) -> Pose:
+        return Pose(self.x, self.y, self.theta)
+
+
+def wrap_angle(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+class DeadReckoning:
+    """Tracks the pose from successive encoder counts and IMU samples, starting at ``start``."""
+
+    def __init__(self, robot: RobotConfig, start: Pose, config: LocalizationConfig | None = None) -> None:
+        self.robot = robot
+        self.config = cfg = config or LocalizationConfig()
+        self._kf = KalmanFilter(dim_x=3, dim_z=2)
+        kf = self._kf
+        kf.x = np.array([start.theta, 0.0, 0.0])
+        kf.P = np.diag([1e-8, 1e-4, cfg.initial_bias_std_rad_s**2])
+        kf.H = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
+        self._H_zero = np.array([[0.0, 1.0, 0.0]])
+        self._x = start.x
+        self._y = start.y
+        self._last_counts: tuple[int, int] | None = None
+        self._last_t: float | None = None
+        # Encoder yaw-rate quantisation: each wheel's count is off by up to one count.
+        self._enc_yaw_quantum = robot.metres_per_count / robot.wheel_base_m  # [rad]
+        self.slip_events = 0
+
+    @property
+    def estimate(self) -> PoseEstimate:
+        x = self._kf.x
+        return PoseEstimate(
+            self._x, self._y, wrap_angle(float(x[0])), math.sqrt(max(self._kf.P[0, 0], 0.0)), float(x[2])
+        )
+
+    def reset_origin(self, counts: EncoderCounts) -> None:
+        """Take the current counts as the reference (call once before the first update)."""
+        self._last_counts = (counts.left, counts.right)
+        self._last_t = counts.t_s
+
+    def update(self, counts: EncoderCounts, imu: list[ImuSample], wheels_commanded: bool = False) -> PoseEstimate:
+        """Advance the estimate to ``counts.t_s`` with the IMU samples taken since the last update.
+
+        ``wheels_commanded`` says whether the wheels were driven during the interval: at low speed a
+        wheel can turn for a while without an encoder count, so unchanged counts alone do not mean
+        the robot was still.
+        """
+        if self._last_counts is None or self._last_t is None:
+            self.reset_origin(counts)
+            return self.estimate
+        dt = counts.t_s - self._last_t
+        if dt <= 0:
+            return self.estimate
+        dl_counts = counts.left - self._last_counts[0]
+        dr_counts = counts.right - self._last_counts[1]
+        self._last_counts = (counts.left, counts.right)
+        self._last_t = counts.t_s
+        mpc = self.robot.metres_per_count
+        dl, dr = dl_counts * mpc, dr_counts * mpc
+        cfg = self.config
+        kf = self._kf
+
+        theta_before = float(kf.x[0])
+        # omega is the mean yaw rate over the tick; it may jump at the tick's start (a new wheel
+        # command), and the heading integrates the new value over the whole tick.
+        kf.F = np.array([[1.0, dt, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        qw = cfg.yaw_rate_jump_std_rad_s**2
+        qb = cfg.bias_walk_std_rad_s2**2 * dt
+        kf.Q = np.array([[qw * dt * dt, qw * dt, 0.0], [qw * dt, qw, 0.0], [0.0, 0.0, qb]])
+        kf.predict()
+
+        enc_rate = (dr - dl) / self.robot.wheel_base_m / dt
+        enc_var = (self._enc_yaw_quantum / dt) ** 2 / 3.0  # two uniform +-1/2-count errors
+        if imu:
+            gyro_rate = float(np.mean([s.gyro_z_rad_s for s in imu]))
+            gyro_var = cfg.gyro_noise_std_rad_s**2 / len(imu)
+            still = dl_counts == 0 and dr_counts == 0 and not wheels_commanded
+            if still:
+                kf.update(np.array([0.0]), R=np.array([[cfg.zero_rate_std_rad_s**2]]), H=self._H_zero)
+                kf.update(np.array([gyro_rate]), R=np.array([[gyro_var]]), H=kf.H[0:1])
+            else:
+                innovation = gyro_rate - float(kf.x[2]) - enc_rate
+                gate = cfg.slip_gate_sigma * math.sqrt(enc_var + gyro_var + float(kf.P[2, 2]))
+                if abs(innovation) > gate:
+                    enc_var *= cfg.slip_inflation
+                    self.slip_events += 1
+                kf.update(np.array([gyro_rate, enc_rate]), R=np.diag([gyro_var, enc_var]))
+        else:
+            kf.update(np.array([enc_rate]), R=np.array([[enc_var]]), H=kf.H[1:2])
+        # Position: encoder distance along the mid-tick fused heading.
+        ds = (dl + dr) / 2.0
+        theta_mid = 0.5 * (theta_before + float(kf.x[0]))
+        self._x += ds * math.cos(theta_mid)
+        self._y += ds * math.sin(theta_mid)
+        return self.estimate

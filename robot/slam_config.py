@@ -1,0 +1,79 @@
+"""Run configuration for the SLAM loop: map, mapper, exploration, motion and localisation settings."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from robot.config import CONFIG_DIR, RobotConfig, format_validation_error, read_toml
+from robot.errors import ConfigError
+from robot.localization import LocalizationConfig
+from robot.mapping.logodds import LogOddsParams
+from robot.motion import MotionConfig
+
+DEFAULT_SLAM_FILE = CONFIG_DIR / "slam.toml"
+MAPPERS = ("logodds", "paper")
+
+
+class SlamConfig(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    resolution: float = Field(default=0.2, ge=0.02, le=1.0)  # map cell side [m]
+    mapper: Literal["logodds", "paper"] = "logodds"
+    nav_cell_min_m: float | None = Field(default=None, gt=0.0, le=2.0)  # None: body + turning radius
+    time_limit_s: float = Field(default=1200.0, gt=0.0)  # stop when the map has not changed this long
+    max_sim_time_s: float = Field(default=6 * 3600.0, gt=0.0)  # safety cap on clock time
+    max_steps: int = Field(default=20000, ge=1)  # safety cap on steps
+    max_inspections: int = Field(default=2, ge=1, le=10)
+    unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
+    logodds: LogOddsParams = LogOddsParams()
+    motion: MotionConfig = MotionConfig()
+    localization: LocalizationConfig = LocalizationConfig()
+
+    def nav_block(self, robot: RobotConfig) -> int:
+        """Map cells per navigation-cell side: enough to hold the body and its turning circle."""
+        need = self.nav_cell_min_m if self.nav_cell_min_m is not None else robot.diameter_m + robot.turning_radius_m
+        return max(1, math.ceil(need / self.resolution - 1e-9))
+
+    @model_validator(mode="after")
+    def _sane(self) -> SlamConfig:
+        if self.resolution < self.logodds.fine_cell_m * 0.999 and self.mapper == "logodds":
+            raise ValueError(
+                f"resolution {self.resolution} m is finer than the evidence grid ({self.logodds.fine_cell_m} m); "
+                "lower logodds.fine_cell_m too"
+            )
+        return self
+
+    def check_robot(self, robot: RobotConfig) -> None:
+        """Refuse settings that cannot work with this robot."""
+        cell = self.nav_block(robot) * self.resolution
+        if cell < robot.diameter_m:
+            raise ConfigError(
+                f"navigation cell {cell:.3f} m is smaller than the robot ({robot.diameter_m} m): raise nav_cell_min_m"
+            )
+        if self.nav_block(robot) > 40:
+            raise ConfigError(
+                f"resolution {self.resolution} m needs {self.nav_block(robot)} map cells per navigation cell; "
+                "use a coarser map"
+            )
+
+
+def slam_config_from_dict(data: dict[str, Any], source: str = "slam config") -> SlamConfig:
+    try:
+        return SlamConfig.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(source, exc)) from None
+
+
+def load_slam_config(path: Path | str | None = None, overrides: dict[str, Any] | None = None) -> SlamConfig:
+    """Defaults from ``config/slam.toml`` (or ``path``), then ``overrides`` on top."""
+    p = Path(path) if path is not None else DEFAULT_SLAM_FILE
+    data = read_toml(p) if p.exists() or path is not None else {}
+    data = dict(data.get("slam", data))
+    for key, value in (overrides or {}).items():
+        if value is not None:
+            data[key] = value
+    return slam_config_from_dict(data, str(p))
