@@ -1,0 +1,1 @@
+"""The sonarslam web service: REST and WebSocket API over the SLAM loop."""
