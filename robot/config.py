@@ -34,7 +34,7 @@ class SonarModel(_Frozen):
     min_range_m: float = Field(default=0.02, ge=0.0)
     max_range_m: float = Field(default=4.0, gt=0.0, le=20.0)  # a reading at or above this means "no echo"
     ping_interval_s: float = Field(default=0.06, ge=0.0)  # gap between consecutive pings
-    firing_order: tuple[int, ...] = (0, 4, 2, 6, 1, 5, 3, 7)
+    firing_order: tuple[int, ...] = (0, 3, 6, 1, 4, 7, 2, 5)  # neither neighbours nor opposites back to back
 
     @model_validator(mode="after")
     def _ranges(self) -> SonarModel:
