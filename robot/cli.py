@@ -155,7 +155,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     progress = None
     if not args.json and not args.quiet and sys.stderr.isatty():
         progress = _step_printer()
-    result = simulate(world, cfg.robot, noise, cfg.slam, seed=args.seed, on_step=progress)
+    log_path = None
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        log_path = Path(args.out) / "sensors.log"
+    result = simulate(world, cfg.robot, noise, cfg.slam, seed=args.seed, on_step=progress, log_path=log_path)
     if progress is not None:
         sys.stderr.write("\n")
     summary = result.summary(cfg.slam.resolution, args.seed, cfg.slam.mapper)
@@ -175,7 +179,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         )
         print(f"final pose error {result.final_xy_error_m * 100:.1f} cm, {result.final_theta_error_deg:.2f} deg")
         if args.out:
-            print(f"wrote {args.out}/map.csv, map.png, map.pgm, map.yaml, truth.csv, trajectory.csv, run.json")
+            print(
+                f"wrote {args.out}/: map.csv, map.png, map.pgm, map.yaml, truth.csv, trajectory.csv, "
+                "sensors.log, run.json"
+            )
     return 0
 
 

@@ -21,6 +21,7 @@ from robot.localization import DeadReckoning, PoseEstimate
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame
 from robot.motion import Pilot
+from robot.sensorlog import SensorLogWriter
 from robot.slam_config import SlamConfig
 from robot.truth import reachable_cells, truth_states
 from robot.world import Pose
@@ -76,6 +77,7 @@ class SlamEngine:
         config: SlamConfig,
         frame: MapFrame,
         on_tick: Callable[[PoseEstimate], None] | None = None,
+        recorder: SensorLogWriter | None = None,
     ) -> None:
         config.check_robot(robot)
         self.hw = hw
@@ -86,7 +88,8 @@ class SlamEngine:
         self.dead_reckoning = DeadReckoning(robot, frame.start, config.localization)
         self._user_tick = on_tick
         self._last_body_xy = (frame.start.x, frame.start.y)
-        self.pilot = Pilot(hw, robot, self.dead_reckoning, config.motion, on_tick=self._on_tick)
+        self.recorder = recorder
+        self.pilot = Pilot(hw, robot, self.dead_reckoning, config.motion, on_tick=self._on_tick, recorder=recorder)
         block = config.nav_block(robot)
         self.explorer = Explorer(frame.grid, block, (0, 0), max_inspections=config.max_inspections)
         self.explorer.start_cell = self.explorer.nav_cell_of(frame.start.x, frame.start.y)
@@ -119,6 +122,8 @@ class SlamEngine:
 
     def _sweep(self) -> None:
         sweep, est = self.pilot.sweep()
+        if self.recorder is not None:
+            self.recorder.sweep(sweep)
         self.mapper.integrate(est.as_pose(), sweep.ranges_m)
         self.mapper.mark_body(est.as_pose())
         self.last_sweep = sweep.ranges_m
@@ -137,6 +142,8 @@ class SlamEngine:
             moved = self.pilot.drive_to(x, y)
             if not moved.ok:
                 self.mapper.mark_contact(moved.pose.as_pose(), heading)
+                if self.recorder is not None:
+                    self.recorder.contact(self.hw.now(), heading)
                 return False
         return True
 

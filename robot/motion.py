@@ -10,11 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from robot.config import RobotConfig
-from robot.hardware import Hardware, SonarSweep
+from robot.hardware import EncoderCounts, Hardware, ImuSample, SonarSweep
 from robot.localization import DeadReckoning, PoseEstimate, wrap_angle
 
 
@@ -44,6 +45,10 @@ class MoveOutcome:
 TickHook = Callable[[PoseEstimate], None]
 
 
+class DeadReckoningRecorder(Protocol):
+    def dead_reckoning(self, counts: EncoderCounts, imu: list[ImuSample], driving: bool) -> None: ...
+
+
 class Pilot:
     """Executes turns and moves on hardware, keeping the dead-reckoning estimate current."""
 
@@ -54,12 +59,14 @@ class Pilot:
         dead_reckoning: DeadReckoning,
         config: MotionConfig | None = None,
         on_tick: TickHook | None = None,
+        recorder: DeadReckoningRecorder | None = None,
     ) -> None:
         self.hw = hw
         self.robot = robot
         self.dr = dead_reckoning
         self.config = config or MotionConfig()
         self.on_tick = on_tick
+        self.recorder = recorder
         self._driving = False
         self.dr.reset_origin(hw.read_encoders())
         hw.read_imu()  # discard anything taken before the origin
@@ -72,10 +79,17 @@ class Pilot:
         self.hw.set_wheel_speeds(left_m_s, right_m_s)
         self._driving = left_m_s != 0.0 or right_m_s != 0.0
 
+    def _update(self, driving: bool) -> PoseEstimate:
+        counts = self.hw.read_encoders()
+        imu = self.hw.read_imu()
+        if self.recorder is not None:
+            self.recorder.dead_reckoning(counts, imu, driving)
+        return self.dr.update(counts, imu, wheels_commanded=driving)
+
     def _tick(self, duration_s: float) -> PoseEstimate:
         driving = self._driving
         self.hw.sleep(duration_s)
-        est = self.dr.update(self.hw.read_encoders(), self.hw.read_imu(), wheels_commanded=driving)
+        est = self._update(driving)
         if self.on_tick is not None:
             self.on_tick(est)
         return est
@@ -93,7 +107,7 @@ class Pilot:
         self.hw.stop()
         self._driving = False
         sweep = self.hw.read_sonar_sweep()
-        est = self.dr.update(self.hw.read_encoders(), self.hw.read_imu())
+        est = self._update(False)
         if self.on_tick is not None:
             self.on_tick(est)
         return sweep, est

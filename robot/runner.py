@@ -23,16 +23,45 @@ from robot.grid import GridSpec
 from robot.mapio import atomic_write_bytes, write_csv, write_map_files, write_png
 from robot.mapping.base import MapFrame
 from robot.metrics import MapMetrics, score
+from robot.sensorlog import SensorLogWriter
 from robot.sim import SimRobot
 from robot.slam_config import SlamConfig
 from robot.truth import truth_grid
-from robot.world import World
+from robot.world import Pose, World
 
 
 def frame_for_world(world: World, resolution: float) -> MapFrame:
     """What the SLAM side is told, as in the paper: the map size (the room's surveyed bounding box),
     the resolution and the start pose. Nothing about obstacles."""
     return MapFrame(grid=world.grid(resolution), start=world.start, extent=world.bounds)
+
+
+def frame_for_unknown_room(resolution: float, size_m: float) -> MapFrame:
+    """An unknown room (real hardware): a square grid of about ``size_m`` centred on the start,
+    which is the origin of the odometry frame."""
+    n = max(1, math.ceil(size_m / resolution))
+    half = n * resolution / 2.0
+    grid = GridSpec(origin_x=-half, origin_y=-half, resolution=resolution, rows=n, cols=n)
+    return MapFrame(grid=grid, start=Pose(0.0, 0.0, 0.0), extent=None)
+
+
+def log_metadata(robot: RobotConfig, frame: MapFrame, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Header for a sensor log: the sonar layout and the map frame, enough to replay it."""
+    g = frame.grid
+    return {
+        "sonars": [m.model_dump() for m in robot.sonars],
+        "sonar": robot.sonar.model_dump(),
+        "robot": {k: v for k, v in robot.model_dump().items() if k not in ("sonars", "sonar")},
+        "frame": {
+            "origin": [g.origin_x, g.origin_y],
+            "resolution": g.resolution,
+            "rows": g.rows,
+            "cols": g.cols,
+            "start": [frame.start.x, frame.start.y, frame.start.theta],
+            "extent": list(frame.extent) if frame.extent is not None else None,
+        },
+        **(extra or {}),
+    }
 
 
 @dataclass
@@ -86,12 +115,21 @@ def simulate(
     slam: SlamConfig,
     seed: int = 0,
     on_step: Callable[[StepResult], None] | None = None,
+    log_path: Path | None = None,
 ) -> RunResult:
-    """Explore ``world`` in the simulator until the engine terminates, then score the map."""
+    """Explore ``world`` in the simulator until the engine terminates, then score the map.
+
+    With ``log_path`` every sensor reading the SLAM side used is written there for ``replay``.
+    """
     wall0 = time.perf_counter()
     grid, truth = truth_grid(world, slam.resolution)
     sim = SimRobot(world, robot, noise, seed=seed)
-    engine = SlamEngine(sim, robot, slam, frame_for_world(world, slam.resolution))
+    frame = frame_for_world(world, slam.resolution)
+    recorder = None
+    if log_path is not None:
+        meta = log_metadata(robot, frame, {"world": world.name, "seed": seed, "slam": slam.model_dump()})
+        recorder = SensorLogWriter(log_path, meta)
+    engine = SlamEngine(sim, robot, slam, frame, recorder=recorder)
     trajectory: list[tuple[float, float, float, float, float, float, float]] = []
 
     def record() -> None:
@@ -99,11 +137,15 @@ def simulate(
         trajectory.append((sim.now(), est.x, est.y, est.theta, true.x, true.y, true.theta))
 
     record()
-    while not engine.done:
-        result = engine.step()
-        record()
-        if on_step is not None:
-            on_step(result)
+    try:
+        while not engine.done:
+            result = engine.step()
+            record()
+            if on_step is not None:
+                on_step(result)
+    finally:
+        if recorder is not None:
+            recorder.close()
     states = engine.map_states()
     xy_err, th_err = pose_errors(engine, sim)
     return RunResult(
@@ -135,7 +177,7 @@ def trajectory_csv(rows: Sequence[tuple[float, ...]]) -> str:
 
 
 def write_run_outputs(out_dir: Path, result: RunResult, summary: dict[str, Any]) -> None:
-    """map.csv/png/pgm/yaml, truth.csv, trajectory.csv and run.json, each written atomically."""
+    """map.csv/png/pgm/yaml, truth.csv/png, trajectory.csv and run.json, each written atomically."""
     out_dir.mkdir(parents=True, exist_ok=True)
     write_map_files(out_dir, result.states, result.grid)
     write_csv(out_dir / "truth.csv", result.truth)

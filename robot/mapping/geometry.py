@@ -55,39 +55,48 @@ def place_beams(pose: Pose, ranges_m: NDArray[np.float64], robot: RobotConfig) -
     return beams
 
 
-def cone_cells(grid: GridSpec, beam: Beam, half_angle_rad: float, reach_m: float) -> ConeCells:
-    """Cells of ``grid`` whose centres are within ``reach_m`` of the transducer and inside the cone."""
+def cone_cells(grid: GridSpec, beam: Beam, half_angle_rad: float, reach_m: float, aperture_m: float = 0.0) -> ConeCells:
+    """Cells of ``grid`` whose centres are within ``reach_m`` of the transducer and inside the beam.
+
+    The beam is a cone of half-angle ``half_angle_rad`` that starts ``aperture_m`` wide at the
+    transducer (a real transducer is a couple of centimetres across, so the beam near it is not a
+    point). ``off_axis_rad`` is the angle from the nearest edge of that aperture.
+    """
     res = grid.resolution
     reach = max(reach_m, 0.0)
-    # Bounding box of the sector, clipped to the grid.
+    half_ap = aperture_m / 2.0
+    c, s = math.cos(beam.axis_rad), math.sin(beam.axis_rad)
+    # Bounding box of the beam: the aperture ends and the sector's corners and extremes.
     angles = beam.axis_rad + np.array([-half_angle_rad, 0.0, half_angle_rad])
-    xs = np.concatenate([[beam.x], beam.x + reach * np.cos(angles)])
-    ys = np.concatenate([[beam.y], beam.y + reach * np.sin(angles)])
-    # The sector's arc may bulge past its chord in the direction of the axis quadrants.
+    px, py = -s * half_ap, c * half_ap
+    xs = [beam.x + px, beam.x - px, *(beam.x + reach * np.cos(angles) + px), *(beam.x + reach * np.cos(angles) - px)]
+    ys = [beam.y + py, beam.y - py, *(beam.y + reach * np.sin(angles) + py), *(beam.y + reach * np.sin(angles) - py)]
     for q in np.arange(-2, 3) * (math.pi / 2):
-        a = q + round((beam.axis_rad - q) / (2 * math.pi)) * 2 * math.pi
-        if abs(math.remainder(a - beam.axis_rad, 2 * math.pi)) <= half_angle_rad:
-            xs = np.append(xs, beam.x + reach * math.cos(a))
-            ys = np.append(ys, beam.y + reach * math.sin(a))
-    c0 = max(int(math.floor((xs.min() - grid.origin_x) / res)), 0)
-    c1 = min(int(math.floor((xs.max() - grid.origin_x) / res)), grid.cols - 1)
-    iy0 = max(int(math.floor((ys.min() - grid.origin_y) / res)), 0)
-    iy1 = min(int(math.floor((ys.max() - grid.origin_y) / res)), grid.rows - 1)
+        if abs(math.remainder(q - beam.axis_rad, 2 * math.pi)) <= half_angle_rad:
+            xs.append(beam.x + reach * math.cos(q) + abs(px))
+            xs.append(beam.x + reach * math.cos(q) - abs(px))
+            ys.append(beam.y + reach * math.sin(q) + abs(py))
+            ys.append(beam.y + reach * math.sin(q) - abs(py))
+    c0 = max(math.floor((min(xs) - grid.origin_x) / res), 0)
+    c1 = min(math.floor((max(xs) - grid.origin_x) / res), grid.cols - 1)
+    iy0 = max(math.floor((min(ys) - grid.origin_y) / res), 0)
+    iy1 = min(math.floor((max(ys) - grid.origin_y) / res), grid.rows - 1)
     if c1 < c0 or iy1 < iy0:
         empty_i = np.zeros(0, dtype=np.int64)
         empty_f = np.zeros(0)
         return ConeCells(empty_i, empty_i, empty_f, empty_f)
-    cx = grid.origin_x + (np.arange(c0, c1 + 1) + 0.5) * res - beam.x
-    cy = grid.origin_y + (np.arange(iy0, iy1 + 1) + 0.5) * res - beam.y
-    dx = cx[None, :]
-    dy = cy[:, None]
+    dx = (grid.origin_x + (np.arange(c0, c1 + 1) + 0.5) * res - beam.x)[None, :]
+    dy = (grid.origin_y + (np.arange(iy0, iy1 + 1) + 0.5) * res - beam.y)[:, None]
+    along = dx * c + dy * s
+    lateral = dy * c - dx * s
+    spread = np.maximum(np.abs(lateral) - half_ap, 0.0)
     dist = np.hypot(dx, dy)
-    off = np.angle(np.exp(1j * (np.arctan2(dy, dx) - beam.axis_rad)))
-    inside = (dist <= reach) & (np.abs(off) <= half_angle_rad)
+    inside = (along > 0) & (dist <= reach) & (spread <= along * math.tan(half_angle_rad))
     iy, ix = np.nonzero(inside)
+    off = np.arctan2(spread[iy, ix], along[iy, ix]) * np.sign(lateral[iy, ix])
     return ConeCells(
         rows=(grid.rows - 1 - (iy + iy0)).astype(np.int64),
         cols=(ix + c0).astype(np.int64),
         dist_m=dist[iy, ix],
-        off_axis_rad=off[iy, ix],
+        off_axis_rad=off,
     )

@@ -3,11 +3,14 @@
 Starts from Moravec & Elfes (1985) and Thrun (Probabilistic Robotics ch. 9), adapted to what sonar
 gets wrong:
 - the cone before an echo is free, with weight falling off towards the cone's edge and with range,
-  where specular misses hide glancing surfaces;
-- the echo's arc is occupied "somewhere": the evidence goes to the arc cells in proportion to how
-  likely each still is to be occupied (cells already known free get little), so repeated views
-  from different vantage points concentrate it on the real surface;
-- a no-echo reading clears at most a short stretch, since it is often a specular miss;
+  where specular misses hide glancing surfaces; nothing behind a cell already believed occupied is
+  cleared, since sound does not pass through it;
+- an echo says the nearest surface is "somewhere on the arc". Its occupied evidence is shared out
+  over the arc's cells in proportion to how likely each still is to hold that surface, and the
+  sharing is recomputed from all the free evidence gathered since, so an arc recorded early is
+  re-attributed once later views show which of its cells are free (Moravec & Elfes' "discounted by
+  the empty evidence", applied to the whole history instead of the moment of the reading);
+- a no-echo reading clears only a short stretch, weakly, since it is often a specular miss;
 - the robot's body clears the cells under it.
 Evidence lives on a fine grid (a few centimetres); a map cell is black if any fine cell in it is
 occupied and white only if all of it is free, which keeps white cells safe.
@@ -36,7 +39,7 @@ class LogOddsParams(BaseModel):
     l_occ: float = Field(default=0.6, gt=0.0)  # per echo, to its most likely arc cell
     l_body: float = Field(default=-3.0, lt=0.0)  # cells under the robot
     l_contact: float = Field(default=3.0, gt=0.0)  # a bump
-    l_clamp: float = Field(default=6.0, gt=0.0)
+    free_clamp: float = Field(default=-6.0, lt=0.0)  # free evidence saturates here
     occ_threshold: float = Field(default=0.8, gt=0.0)
     free_threshold: float = Field(default=-0.65, lt=0.0)
     free_margin_m: float = Field(default=0.012, ge=0.0)  # carve up to this short of the echo ...
@@ -51,6 +54,13 @@ class LogOddsParams(BaseModel):
     extent_snap_m: float = Field(default=0.03, ge=0.0)  # echoes this close inside the room box are its wall
     free_edge_weight: float = Field(default=0.5, ge=0.0, le=1.0)  # free weight at the cone edge
     arc_edge_weight: float = Field(default=0.6, ge=0.0, le=1.0)  # occupied prior at the cone edge
+    free_discount: float = Field(default=1.5, ge=0.0)  # arc share falls as exp(discount * free evidence)
+    pad_m: float = Field(default=0.3, ge=0.0)  # evidence kept this far past the map's edge
+    explain_rounds: int = Field(default=2, ge=0, le=10)  # explaining-away iterations
+    explain_gain: float = Field(default=1.0, ge=0.0)  # how strongly existing support attracts an echo
+    explain_cap: float = Field(default=5.0, gt=0.0)
+    aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
+    white_min_free: float = Field(default=0.7, gt=0.0, le=1.0)  # share of a map cell seen free to call it white
 
 
 class LogOddsMapper:
@@ -62,22 +72,39 @@ class LogOddsMapper:
         self.params = p = params or LogOddsParams()
         grid = frame.grid
         self.k = max(1, round(grid.resolution / p.fine_cell_m))
+        f = grid.resolution / self.k
+        # The evidence grid extends past the map, so an echo off a wall on the map's edge has cells to
+        # land in and does not get pinned on the free cells in front of the wall.
+        self.pad = max(1, math.ceil(p.pad_m / f))
+        pad = self.pad
         self.fine = GridSpec(
-            grid.origin_x, grid.origin_y, grid.resolution / self.k, grid.rows * self.k, grid.cols * self.k
+            grid.origin_x - pad * f,
+            grid.origin_y - pad * f,
+            f,
+            grid.rows * self.k + 2 * pad,
+            grid.cols * self.k + 2 * pad,
         )
-        self.logodds = np.zeros(self.fine.shape, dtype=np.float32)
+        self._inner = (slice(pad, pad + grid.rows * self.k), slice(pad, pad + grid.cols * self.k))
+        self.free_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # <= 0
+        self.contact_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # >= 0
+        # Every echo's arc, flattened: fine-cell index, prior weight, and per-echo strength.
+        self._arc_cells: list[NDArray[np.int64]] = []
+        self._arc_prior: list[NDArray[np.float64]] = []
+        self._arc_strength: list[float] = []
+        self._occ_cache: NDArray[np.float32] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         self._outside = blocked_by_extent(frame)
         if frame.extent is not None:
             self._fine_outside = self._fine_outside_extent(frame.extent, 0.0)
             self._near_extent = self._fine_outside_extent(frame.extent, p.extent_snap_m)
         else:
-            self._fine_outside = np.zeros(self.fine.shape, dtype=bool)
+            self._fine_outside = np.zeros((grid.rows * self.k, grid.cols * self.k), dtype=bool)
             self._near_extent = self._fine_outside
 
     def _fine_outside_extent(self, extent: tuple[float, float, float, float], margin_m: float) -> NDArray[np.bool_]:
-        """Fine cells whose centre lies outside the room box shrunk by ``margin_m``."""
+        """Fine cells of the map's area whose centre lies outside the room box shrunk by ``margin_m``."""
         xs, ys = self.fine.centers()
+        xs, ys = xs[self._inner], ys[self._inner]
         min_x, min_y, max_x, max_y = extent
         m = margin_m
         return (xs < min_x + m) | (xs > max_x - m) | (ys < min_y + m) | (ys > max_y - m)
@@ -85,31 +112,32 @@ class LogOddsMapper:
     # -- evidence ----------------------------------------------------------------------------
     def integrate(self, pose: Pose, ranges_m: NDArray[np.float64]) -> None:
         p = self.params
-        L = self.logodds
+        F = self.free_evidence
         half = self._half
+        L = self.logodds
+        cols_n = self.fine.cols
         for beam in place_beams(pose, ranges_m, self.robot):
             r = beam.range_m
-            if beam.echo and r <= p.max_echo_range_m:
+            mapped_echo = beam.echo and r <= p.max_echo_range_m
+            if mapped_echo:
                 free_to = r - p.free_margin_m - p.free_margin_frac * r
                 reach = r + self.fine.resolution
             else:
                 free_to = min(p.no_echo_carve_m, r)
                 reach = free_to
-            reach = min(reach, p.carve_max_m + self.fine.resolution) if not beam.echo else reach
-            cells = cone_cells(self.fine, beam, half, reach)
+            cells = cone_cells(self.fine, beam, half, reach, p.aperture_m)
             if cells.rows.size == 0:
                 continue
             ang = (cells.off_axis_rad / half) ** 2
-            free = cells.dist_m < free_to
-            free &= ~self._occluded(cells, L, free_to)
+            free = (cells.dist_m < free_to) & ~self._occluded(cells, L, free_to)
             if np.any(free):
                 d = cells.dist_m[free]
                 fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
                 w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
                 if not beam.echo:
                     w = w * p.no_echo_weight
-                np.add.at(L, (cells.rows[free], cells.cols[free]), p.l_free * w)
-            if not (beam.echo and r <= p.max_echo_range_m):
+                np.add.at(F, (cells.rows[free], cells.cols[free]), p.l_free * w)
+            if not mapped_echo:
                 continue
             # The surface is at r; the occupied cell is the one just behind it.
             arc = (cells.dist_m >= r) & (cells.dist_m < r + self.fine.resolution)
@@ -124,19 +152,42 @@ class LogOddsMapper:
                 prior = np.append(prior, 1.0)
             if rows.size == 0:
                 continue
-            keep = ~self._fine_outside[rows, cols] & ~self._near_extent[rows, cols]
-            rows, cols, prior = rows[keep], cols[keep], prior[keep]
-            if rows.size == 0:
-                continue
-            p_occ = 1.0 / (1.0 + np.exp(-L[rows, cols].astype(np.float64)))
-            w = prior * p_occ
-            if w.max() <= 0:
-                continue
             span = max(p.max_echo_range_m - p.occ_full_m, 1e-9)
             near = float(np.clip((p.max_echo_range_m - r) / span, 0.0, 1.0))
-            strength = p.occ_far_weight + (1.0 - p.occ_far_weight) * near
-            np.add.at(L, (rows, cols), p.l_occ * strength * w / w.max())
-        np.clip(L, -p.l_clamp, p.l_clamp, out=L)
+            self._arc_cells.append(rows * cols_n + cols)
+            self._arc_prior.append(prior)
+            self._arc_strength.append(p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
+            self._occ_cache = None
+        np.maximum(F, p.free_clamp, out=F)
+        self._occ_cache = None
+
+    def occupied_evidence(self) -> NDArray[np.float32]:
+        """Every echo's evidence, shared over its arc by the current free evidence."""
+        if self._occ_cache is not None:
+            return self._occ_cache
+        occ = self.contact_evidence.copy()
+        if self._arc_cells:
+            cells = np.concatenate(self._arc_cells)
+            prior = np.concatenate(self._arc_prior)
+            sizes = np.array([a.size for a in self._arc_cells])
+            starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+            strength = self.params.l_occ * np.repeat(np.asarray(self._arc_strength), sizes)
+            base = prior * np.exp(self.params.free_discount * self.free_evidence.ravel()[cells].astype(np.float64))
+            support: NDArray[np.float64] = np.zeros(occ.size)
+            # Explaining away: an echo is the nearest surface, one place on its arc. Cells that other
+            # echoes already put a surface in take the larger share; a few rounds settle it.
+            for _ in range(self.params.explain_rounds + 1):
+                w = base * np.exp(self.params.explain_gain * np.minimum(support[cells], self.params.explain_cap))
+                wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
+                share = strength * w / np.maximum(wmax, 1e-12)
+                support = np.bincount(cells, weights=share, minlength=occ.size).astype(np.float64)
+            occ += support.reshape(occ.shape).astype(np.float32)
+        self._occ_cache = occ
+        return occ
+
+    @property
+    def logodds(self) -> NDArray[np.float32]:
+        return self.free_evidence + self.occupied_evidence()
 
     def _occluded(self, cells: ConeCells, L: NDArray[np.float32], free_to: float) -> NDArray[np.bool_]:
         """Cone cells at or behind a cell already believed occupied.
@@ -171,43 +222,51 @@ class LogOddsMapper:
 
     def mark_body(self, pose: Pose) -> None:
         rows, cols = self._disk(pose.x, pose.y, self.robot.radius_m)
-        L = self.logodds
-        L[rows, cols] = np.minimum(L[rows, cols] + self.params.l_body, L[rows, cols])
-        np.clip(L, -self.params.l_clamp, self.params.l_clamp, out=L)
+        F = self.free_evidence
+        F[rows, cols] = np.maximum(F[rows, cols] + self.params.l_body, self.params.free_clamp)
+        self._occ_cache = None
 
     def mark_contact(self, pose: Pose, direction_rad: float) -> None:
         d = self.robot.radius_m + 0.5 * self.fine.resolution
         r, c = self.fine.world_to_index(pose.x + d * math.cos(direction_rad), pose.y + d * math.sin(direction_rad))
         if self.fine.contains_index(r, c):
-            self.logodds[int(r), int(c)] = min(
-                self.logodds[int(r), int(c)] + self.params.l_contact, self.params.l_clamp
-            )
+            self.contact_evidence[int(r), int(c)] += self.params.l_contact
+            self._occ_cache = None
 
     # -- belief -------------------------------------------------------------------------------
     def fine_states(self) -> NDArray[np.int8]:
+        """Per evidence cell over the map's area (padding excluded): FREE, OCCUPIED or UNKNOWN."""
         p = self.params
-        out = np.full(self.fine.shape, UNKNOWN, dtype=np.int8)
-        out[self.logodds >= p.occ_threshold] = OCCUPIED
-        out[self.logodds <= p.free_threshold] = FREE
+        L = self.logodds[self._inner]
+        out = np.full(L.shape, UNKNOWN, dtype=np.int8)
+        out[L >= p.occ_threshold] = OCCUPIED
+        out[L <= p.free_threshold] = FREE
+        # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
+        # there come from the wall, and the floor up to it is free.
+        out[self._near_extent & ~self._fine_outside] = FREE
         return out
+
+    def _blocks(self) -> NDArray[np.int8]:
+        grid = self.frame.grid
+        return self.fine_states().reshape(grid.rows, self.k, grid.cols, self.k)
 
     def passable(self, min_free_fraction: float = 0.25) -> NDArray[np.bool_]:
         """Map cells the robot may drive into: nothing occupied and mostly known free."""
-        k = self.k
-        grid = self.frame.grid
-        blocks = self.fine_states().reshape(grid.rows, k, grid.cols, k)
+        blocks = self._blocks()
         occ = np.any(blocks == OCCUPIED, axis=(1, 3))
         free_frac = np.mean(blocks == FREE, axis=(1, 3))
         return ~occ & (free_frac >= min_free_fraction) & ~self._outside
 
     def states(self) -> NDArray[np.int8]:
-        k = self.k
         grid = self.frame.grid
-        fine = self.fine_states()
-        blocks = fine.reshape(grid.rows, k, grid.cols, k)
+        k = self.k
+        blocks = self._blocks()
         inside = ~self._fine_outside.reshape(grid.rows, k, grid.cols, k)
         occ = np.any((blocks == OCCUPIED) & inside, axis=(1, 3))
-        free = np.all((blocks == FREE) | ~inside, axis=(1, 3))
+        # White needs no occupied evidence and nearly all of the cell seen free: a strip along an
+        # obstacle's face that no beam could clear without touching the face may stay unseen.
+        free_frac = np.mean((blocks == FREE) | ~inside, axis=(1, 3))
+        free = free_frac >= self.params.white_min_free
         out = np.full(grid.shape, UNKNOWN, dtype=np.int8)
         out[free & ~self._outside] = FREE
         out[occ | self._outside] = OCCUPIED
