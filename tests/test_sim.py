@@ -132,7 +132,7 @@ def test_glancing_incidence_misses_at_the_configured_rate(miss_prob: float) -> N
     seg = np.array([[2.0 - 3 * tx, 0.0 - 3 * ty, 2.0 + 3 * tx, 0.0 + 3 * ty]])
     if (seg[0, 2] - seg[0, 0]) * (-seg[0, 1]) - (seg[0, 3] - seg[0, 1]) * (-seg[0, 0]) < 0:
         seg = seg[:, [2, 3, 0, 1]]
-    dist, incidence = cone_candidates(seg, np.zeros((1, 2)), np.zeros(1), math.radians(15.0))
+    dist, incidence, _ = cone_candidates(seg, np.zeros((1, 2)), np.zeros(1), math.radians(15.0))
     assert np.isfinite(dist[0, 0])
     assert math.degrees(incidence[0, 0]) >= 45.0
     rng = np.random.default_rng(11)
@@ -177,3 +177,29 @@ def test_same_seed_same_run() -> None:
 
     assert run(4) == run(4)
     assert run(4) != run(5)
+
+
+def test_a_lost_echo_never_lets_a_surface_behind_an_obstacle_answer() -> None:
+    # A wall crosses the beam at a glancing angle about 0.8 m ahead, with the far wall 3.4 m away. When the
+    # wall's echo is lost, the far wall must not answer through it.
+    noise = SimNoise(
+        specular_miss_prob=1.0,
+        false_echo_prob=0.0,
+        dropout_prob=0.0,
+        range_noise_m=0.0,
+        range_noise_frac=0.0,
+        range_quantum_m=0.0,
+    )
+    block = {"shape": "rect", "center": [2.5, 2.0], "size": [0.2, 3.0], "angle_deg": 65.0}
+    sim = SimRobot(box_world(width=4.5, x=1.0, y=2.0, obstacles=[block]), ROBOT, noise, seed=1)
+    readings = np.array([sim.read_sonar_sweep().ranges_m[0] for _ in range(50)])
+    assert np.all(readings >= ROBOT.sonar.max_range_m)
+
+
+def test_ray_blocked_sees_segments_between_the_ends() -> None:
+    from robot.sim.sonar import ray_blocked
+
+    segs = np.array([[1.0, -1.0, 1.0, 1.0], [3.0, -1.0, 3.0, 1.0]])
+    assert ray_blocked(segs, 0.0, 0.0, 2.0, 0.0, skip=-1)
+    assert not ray_blocked(segs, 0.0, 0.0, 0.5, 0.0, skip=-1)
+    assert not ray_blocked(segs, 0.0, 0.0, 1.0, 0.0, skip=0)

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from robot.config import RobotConfig, SimNoise
 from robot.hardware import EncoderCounts, ImuSample, SonarSweep
-from robot.sim.sonar import cone_candidates, simulate_ranges
+from robot.sim.sonar import cone_candidates, ray_blocked, simulate_ranges
 from robot.world import Pose, World
 
 
@@ -146,8 +146,14 @@ class SimRobot:
         mxy = self._mount_xy[idx]
         origins = np.column_stack([self._x + c * mxy[:, 0] - s * mxy[:, 1], self._y + s * mxy[:, 0] + c * mxy[:, 1]])
         bearings = self._theta + self._mount_bearing[idx]
-        dist, inc = cone_candidates(self._segments, origins, bearings, self._half_beam)
-        return simulate_ranges(dist, inc, self.robot.sonar, self.noise, self._rng)
+        dist, inc, points = cone_candidates(self._segments, origins, bearings, self._half_beam)
+        segs = self._segments
+
+        def occluded(i: int, j: int) -> bool:
+            ox, oy = origins[i]
+            return ray_blocked(segs, ox, oy, ox + points[i, j, 0], oy + points[i, j, 1], j)
+
+        return simulate_ranges(dist, inc, self.robot.sonar, self.noise, self._rng, occluded)
 
     def _advance(self, ticks: int, dt: float) -> None:
         noise = self.noise
@@ -169,11 +175,16 @@ class SimRobot:
             ys = self._y + np.cumsum(ds * np.sin(theta_mid))
             ok = ticks
             if np.any(ds != 0.0):
-                clearance = _point_segment_distance(xs, ys, self._segments)
-                hit = np.flatnonzero(clearance < self.robot.radius_m)
-                if hit.size:
-                    ok = int(hit[0])  # the body stops at the last free tick; the wheels stall
-                    self.collisions += ticks - ok
+                # Every tick lies within the path length of the end point, so a clear end point with
+                # that much to spare rules out a collision without checking each tick.
+                path_m = float(np.abs(ds).sum())
+                end_clear = _point_segment_distance(xs[-1:], ys[-1:], self._segments)[0]
+                if end_clear < self.robot.radius_m + path_m:
+                    clearance = _point_segment_distance(xs, ys, self._segments)
+                    hit = np.flatnonzero(clearance < self.robot.radius_m)
+                    if hit.size:
+                        ok = int(hit[0])  # the body stops at the last free tick; the wheels stall
+                        self.collisions += ticks - ok
             rate = dtheta / dt
             if ok < ticks:
                 rate[ok:] = 0.0

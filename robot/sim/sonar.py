@@ -7,6 +7,7 @@ to the transducer is found, so a thin obstacle cannot hide between sample rays.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,13 +22,13 @@ def cone_candidates(
     origins: NDArray[np.float64],
     bearings_rad: NDArray[np.float64],
     half_angle_rad: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Distance and incidence angle of every edge's nearest point inside every cone.
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Distance, incidence angle and position of every edge's nearest point inside every cone.
 
     ``segments`` (S, 4) rows x0 y0 x1 y1 with free space on the left; ``origins`` (n, 2) and
     ``bearings_rad`` (n,) describe the transducers. Returns ``dist`` (n, S) [m], ``inf`` where the edge
     is outside the cone or faces away, and ``incidence`` (n, S) [rad], the angle between the echo path
-    and the edge's normal.
+    and the edge's normal, and ``points`` (n, S, 2), the nearest points relative to the transducers.
     """
     ox = origins[:, 0:1]
     oy = origins[:, 1:2]
@@ -68,7 +69,21 @@ def cone_candidates(
     with np.errstate(divide="ignore", invalid="ignore"):
         cos_inc = np.abs(qx * (-dy) + qy * dx) / (np.sqrt(len2) * np.maximum(dist, _EPS))
     incidence = np.arccos(np.clip(cos_inc, 0.0, 1.0))
-    return dist, incidence
+    return dist, incidence, np.stack([qx, qy], axis=-1)
+
+
+def ray_blocked(segments: NDArray[np.float64], ox: float, oy: float, px: float, py: float, skip: int) -> bool:
+    """Whether the straight path from (ox, oy) to (px, py) crosses any segment but ``skip`` before it ends."""
+    ax, ay = segments[:, 0], segments[:, 1]
+    ex, ey = segments[:, 2] - ax, segments[:, 3] - ay
+    rx, ry = px - ox, py - oy
+    denom = rx * ey - ry * ex
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((ax - ox) * ey - (ay - oy) * ex) / denom  # along the path
+        u = ((ax - ox) * ry - (ay - oy) * rx) / denom  # along the segment
+    hit = (np.abs(denom) > 1e-12) & (t > 1e-6) & (t < 1.0 - 1e-6) & (u >= 0.0) & (u <= 1.0)
+    hit[skip] = False
+    return bool(hit.any())
 
 
 def specular_miss_probability(incidence_rad: NDArray[np.float64], noise: SimNoise) -> NDArray[np.float64]:
@@ -88,17 +103,30 @@ def simulate_ranges(
     model: SonarModel,
     noise: SimNoise,
     rng: np.random.Generator,
+    occluded: Callable[[int, int], bool] | None = None,
 ) -> NDArray[np.float64]:
     """Turn per-edge candidates (n, S) into one reading per transducer [m].
 
-    The reading is the nearest edge whose echo is not lost to specular reflection (a lost nearest
-    echo lets a farther surface answer, as multipath does), with range noise, quantisation, short
-    false echoes and dropouts. ``max_range_m`` means no echo.
+    The reading is the nearest edge whose echo is not lost to specular reflection, with range noise,
+    quantisation, short false echoes and dropouts. When the nearest echo is lost, a farther surface
+    may answer (as multipath does), but only one in the open: ``occluded(i, j)`` says whether edge
+    j's nearest point is hidden from transducer i behind something else, since sound does not pass
+    through solid objects. ``max_range_m`` means no echo.
     """
     n = dist.shape[0]
     answers = rng.random(dist.shape) >= specular_miss_probability(incidence, noise)
     heard = np.where(answers, dist, np.inf)
     true_range = heard.min(axis=1) if heard.shape[1] else np.full(n, np.inf)
+    if occluded is not None and heard.shape[1]:
+        nearest = dist.min(axis=1)
+        for i in np.flatnonzero(np.isfinite(true_range) & (true_range > nearest)):
+            true_range[i] = np.inf
+            for j in np.argsort(heard[i]):
+                if not np.isfinite(heard[i, j]):
+                    break
+                if not occluded(int(i), int(j)):
+                    true_range[i] = heard[i, j]
+                    break
     sigma = noise.range_noise_m + noise.range_noise_frac * np.where(np.isfinite(true_range), true_range, 0.0)
     reading = true_range + sigma * rng.standard_normal(n)
 
