@@ -95,6 +95,8 @@ class SlamEngine:
         self.explorer.start_cell = self.explorer.nav_cell_of(frame.start.x, frame.start.y)
         self.stats = EngineStats(last_change_t=hw.now())
         self._exported = frame.grid.empty()
+        self._belief = frame.grid.empty()
+        self._passable = np.zeros(frame.grid.shape, dtype=bool)
         self._started = False
         self.last_sweep: NDArray[np.float64] | None = None
         self.done = False
@@ -157,12 +159,14 @@ class SlamEngine:
                 self.pilot.drive_to(x, y)
 
     def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
-        exported = classify(self.mapper.states(), self.frame.start_cell)
+        self._belief = self.mapper.states()
+        self._passable = self.mapper.passable()
+        exported = classify(self._belief, self.frame.start_cell)
         changed = np.nonzero(exported != self._exported)
         if changed[0].size:
             self.stats.last_change_t = self.hw.now()
         self._exported = exported
-        frontier = int(self.explorer.frontier(self.mapper.states(), self.mapper.passable()).sum())
+        frontier = int(self.explorer.frontier(self._belief, self._passable).sum())
         return StepResult(
             step=self.stats.steps,
             t_s=self.hw.now(),
@@ -202,7 +206,7 @@ class SlamEngine:
 
         est = self.pose
         current = self.explorer.nav_cell_of(est.x, est.y)
-        action: Action = self.explorer.decide(current, est.theta, self.mapper.states(), self.mapper.passable())
+        action: Action = self.explorer.decide(current, est.theta, self._belief, self._passable)
         self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
         ok = True
         target_xy = None

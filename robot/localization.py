@@ -60,7 +60,7 @@ class DeadReckoning:
         kf.x = np.array([start.theta, 0.0, 0.0])
         kf.P = np.diag([1e-8, 1e-4, cfg.initial_bias_std_rad_s**2])
         kf.H = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
-        self._H_zero = np.array([[0.0, 1.0, 0.0]])
+        self._H_still = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
         self._x = start.x
         self._y = start.y
         self._last_counts: tuple[int, int] | None = None
@@ -119,8 +119,10 @@ class DeadReckoning:
             gyro_var = cfg.gyro_noise_std_rad_s**2 / len(imu)
             still = dl_counts == 0 and dr_counts == 0 and not wheels_commanded
             if still:
-                kf.update(np.array([0.0]), R=np.array([[cfg.zero_rate_std_rad_s**2]]), H=self._H_zero)
-                kf.update(np.array([gyro_rate]), R=np.array([[gyro_var]]), H=kf.H[0:1])
+                # Zero-rate pseudo-measurement and the gyro together: the gyro then reads the bias.
+                kf.update(
+                    np.array([gyro_rate, 0.0]), R=np.diag([gyro_var, cfg.zero_rate_std_rad_s**2]), H=self._H_still
+                )
             else:
                 innovation = gyro_rate - float(kf.x[2]) - enc_rate
                 gate = cfg.slip_gate_sigma * math.sqrt(enc_var + gyro_var + float(kf.P[2, 2]))

@@ -22,15 +22,15 @@ from robot.localization import DeadReckoning, PoseEstimate, wrap_angle
 class MotionConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    tick_s: float = Field(default=0.05, gt=0.0, le=0.5)  # control period [s]
+    tick_s: float = Field(default=0.1, gt=0.0, le=0.5)  # control period [s]
     drive_speed_m_s: float = Field(default=0.2, gt=0.0)  # cruise rim speed
     turn_speed_m_s: float = Field(default=0.08, gt=0.0)  # rim speed when turning in place
-    min_speed_m_s: float = Field(default=0.03, gt=0.0)  # creep speed near the goal
+    min_speed_m_s: float = Field(default=0.05, gt=0.0)  # creep speed near the goal
     heading_tolerance_deg: float = Field(default=0.7, gt=0.0)
     position_tolerance_m: float = Field(default=0.004, gt=0.0)
     heading_gain: float = Field(default=2.0, ge=0.0)  # steering on the way [1/s]
-    slow_down_m: float = Field(default=0.05, gt=0.0)  # start creeping this far from the goal
-    slow_down_rad: float = Field(default=0.25, gt=0.0)
+    slow_down_m: float = Field(default=0.02, gt=0.0)  # start creeping this far from the goal
+    slow_down_rad: float = Field(default=0.1, gt=0.0)
     stall_timeout_s: float = Field(default=1.5, gt=0.0)  # no encoder progress for this long = blocked
     settle_s: float = Field(default=0.05, ge=0.0)  # pause after stopping before a sweep
 

@@ -59,8 +59,38 @@ class LogOddsParams(BaseModel):
     explain_rounds: int = Field(default=2, ge=0, le=10)  # explaining-away iterations
     explain_gain: float = Field(default=1.0, ge=0.0)  # how strongly existing support attracts an echo
     explain_cap: float = Field(default=5.0, gt=0.0)
+    reattribute_every: int = Field(default=10, ge=1)  # sweeps between re-sharing every echo
     aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
     white_min_free: float = Field(default=0.7, gt=0.0, le=1.0)  # share of a map cell seen free to call it white
+
+
+class _ArcStore:
+    """Every echo's arc, flattened into growing arrays: fine-cell index and prior per cell, start
+    offset and strength per echo."""
+
+    def __init__(self) -> None:
+        self.cells = np.zeros(4096, dtype=np.int64)
+        self.prior = np.zeros(4096)
+        self.starts = np.zeros(512, dtype=np.int64)
+        self.strength = np.zeros(512)
+        self.n_cells = 0
+        self.n_arcs = 0
+
+    def add(self, cells: NDArray[np.int64], prior: NDArray[np.float64], strength: float) -> None:
+        n = cells.size
+        if self.n_cells + n > self.cells.size:
+            size = max(2 * self.cells.size, self.n_cells + n)
+            self.cells = np.resize(self.cells, size)
+            self.prior = np.resize(self.prior, size)
+        if self.n_arcs + 1 > self.starts.size:
+            self.starts = np.resize(self.starts, 2 * self.starts.size)
+            self.strength = np.resize(self.strength, 2 * self.strength.size)
+        self.cells[self.n_cells : self.n_cells + n] = cells
+        self.prior[self.n_cells : self.n_cells + n] = prior
+        self.starts[self.n_arcs] = self.n_cells
+        self.strength[self.n_arcs] = strength
+        self.n_cells += n
+        self.n_arcs += 1
 
 
 class LogOddsMapper:
@@ -87,11 +117,14 @@ class LogOddsMapper:
         self._inner = (slice(pad, pad + grid.rows * self.k), slice(pad, pad + grid.cols * self.k))
         self.free_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # <= 0
         self.contact_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # >= 0
-        # Every echo's arc, flattened: fine-cell index, prior weight, and per-echo strength.
-        self._arc_cells: list[NDArray[np.int64]] = []
-        self._arc_prior: list[NDArray[np.float64]] = []
-        self._arc_strength: list[float] = []
+        self._arcs = _ArcStore()
+        self._support: NDArray[np.float64] | None = None  # shares from the last full re-sharing
+        self._support_arcs = 0  # arcs covered by it
+        self._recent: NDArray[np.float64] | None = None
+        self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
+        self._fine_cache: NDArray[np.int8] | None = None
+        self._last_logodds: NDArray[np.float32] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         self._outside = blocked_by_extent(frame)
         if frame.extent is not None:
@@ -114,7 +147,8 @@ class LogOddsMapper:
         p = self.params
         F = self.free_evidence
         half = self._half
-        L = self.logodds
+        # Occlusion uses the belief from before this sweep (one re-attribution per sweep, not two).
+        L = self._last_logodds if self._last_logodds is not None else self.logodds
         cols_n = self.fine.cols
         for beam in place_beams(pose, ranges_m, self.robot):
             r = beam.range_m
@@ -154,40 +188,61 @@ class LogOddsMapper:
                 continue
             span = max(p.max_echo_range_m - p.occ_full_m, 1e-9)
             near = float(np.clip((p.max_echo_range_m - r) / span, 0.0, 1.0))
-            self._arc_cells.append(rows * cols_n + cols)
-            self._arc_prior.append(prior)
-            self._arc_strength.append(p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
-            self._occ_cache = None
+            self._arcs.add(rows * cols_n + cols, prior, p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
         np.maximum(F, p.free_clamp, out=F)
+        self._sweeps_since_full += 1
         self._occ_cache = None
 
-    def occupied_evidence(self) -> NDArray[np.float32]:
-        """Every echo's evidence, shared over its arc by the current free evidence."""
-        if self._occ_cache is not None:
+    def _attribute(self, first_arc: int, support: NDArray[np.float64], rounds: int) -> NDArray[np.float64]:
+        """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support``."""
+        arcs = self._arcs
+        lo = int(arcs.starts[first_arc])
+        hi = arcs.n_cells
+        cells = arcs.cells[lo:hi]
+        starts = arcs.starts[first_arc : arcs.n_arcs] - lo
+        sizes = np.diff(np.append(starts, hi - lo))
+        strength = self.params.l_occ * np.repeat(arcs.strength[first_arc : arcs.n_arcs], sizes)
+        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * self.free_evidence.ravel()[cells])
+        own = np.zeros_like(support)
+        for _ in range(rounds + 1):
+            w = base * np.exp(
+                self.params.explain_gain * np.minimum(support[cells] + own[cells], self.params.explain_cap)
+            )
+            wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
+            own = np.bincount(cells, weights=strength * w / np.maximum(wmax, 1e-12), minlength=support.size)
+        return support + own
+
+    def occupied_evidence(self, full: bool = False) -> NDArray[np.float32]:
+        """Every echo's evidence, shared over its arc by the free evidence gathered so far.
+
+        Explaining away: an echo comes from the nearest surface, one place on its arc, so cells that
+        other echoes already put a surface in take the larger share. Re-sharing every echo is done
+        every ``reattribute_every`` sweeps (and for ``full``); in between, new echoes are shared on
+        top of the last re-sharing.
+        """
+        if self._occ_cache is not None and not full:
             return self._occ_cache
+        arcs = self._arcs
+        p = self.params
+        stale = arcs.n_arcs - self._support_arcs
+        if arcs.n_arcs and (full or self._support is None or self._sweeps_since_full >= p.reattribute_every):
+            self._support = self._attribute(0, np.zeros(self.fine.rows * self.fine.cols), p.explain_rounds)
+            self._support_arcs = arcs.n_arcs
+            self._sweeps_since_full = 0
+            self._recent = self._support
+        elif stale > 0 and self._support is not None:
+            self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
         occ = self.contact_evidence.copy()
-        if self._arc_cells:
-            cells = np.concatenate(self._arc_cells)
-            prior = np.concatenate(self._arc_prior)
-            sizes = np.array([a.size for a in self._arc_cells])
-            starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-            strength = self.params.l_occ * np.repeat(np.asarray(self._arc_strength), sizes)
-            base = prior * np.exp(self.params.free_discount * self.free_evidence.ravel()[cells].astype(np.float64))
-            support: NDArray[np.float64] = np.zeros(occ.size)
-            # Explaining away: an echo is the nearest surface, one place on its arc. Cells that other
-            # echoes already put a surface in take the larger share; a few rounds settle it.
-            for _ in range(self.params.explain_rounds + 1):
-                w = base * np.exp(self.params.explain_gain * np.minimum(support[cells], self.params.explain_cap))
-                wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
-                share = strength * w / np.maximum(wmax, 1e-12)
-                support = np.bincount(cells, weights=share, minlength=occ.size).astype(np.float64)
-            occ += support.reshape(occ.shape).astype(np.float32)
+        if self._recent is not None:
+            occ += self._recent.reshape(occ.shape).astype(np.float32)
         self._occ_cache = occ
         return occ
 
     @property
     def logodds(self) -> NDArray[np.float32]:
-        return self.free_evidence + self.occupied_evidence()
+        L = self.free_evidence + self.occupied_evidence()
+        self._last_logodds = L
+        return L
 
     def _occluded(self, cells: ConeCells, L: NDArray[np.float32], free_to: float) -> NDArray[np.bool_]:
         """Cone cells at or behind a cell already believed occupied.
@@ -236,6 +291,8 @@ class LogOddsMapper:
     # -- belief -------------------------------------------------------------------------------
     def fine_states(self) -> NDArray[np.int8]:
         """Per evidence cell over the map's area (padding excluded): FREE, OCCUPIED or UNKNOWN."""
+        if self._occ_cache is not None and self._fine_cache is not None:
+            return self._fine_cache
         p = self.params
         L = self.logodds[self._inner]
         out = np.full(L.shape, UNKNOWN, dtype=np.int8)
@@ -244,6 +301,7 @@ class LogOddsMapper:
         # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
         # there come from the wall, and the floor up to it is free.
         out[self._near_extent & ~self._fine_outside] = FREE
+        self._fine_cache = out
         return out
 
     def _blocks(self) -> NDArray[np.int8]:
