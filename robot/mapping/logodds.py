@@ -209,7 +209,9 @@ class LogOddsMapper:
                 self.params.explain_gain * np.minimum(support[cells] + own[cells], self.params.explain_cap)
             )
             wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
-            own = np.bincount(cells, weights=strength * w / np.maximum(wmax, 1e-12), minlength=support.size)
+            own = np.bincount(cells, weights=strength * w / np.maximum(wmax, 1e-12), minlength=support.size).astype(
+                np.float64
+            )
         return support + own
 
     def occupied_evidence(self, full: bool = False) -> NDArray[np.float32]:
