@@ -266,6 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resolution", type=_positive_float, default=None)
     p.add_argument("--mapper", choices=("logodds", "paper"), default=None)
     p.add_argument("--config", default=None)
+    p.add_argument("--noise", choices=("default", "off"), default="default", help="simulator errors (default: on)")
     p.add_argument("--out", default=None, help="directory for figures and per-run maps")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_evaluate)

@@ -108,7 +108,7 @@ class SimNoise(_Frozen):
     wheel_slip_std: float = Field(default=0.02, ge=0.0, le=0.5)  # per-tick relative ground-speed error
     wheel_radius_error_left: float = Field(default=0.004, ge=-0.2, le=0.2)  # true/nominal - 1
     wheel_radius_error_right: float = Field(default=-0.004, ge=-0.2, le=0.2)
-    gyro_noise_std_rad_s: float = Field(default=0.003, ge=0.0)  # white noise per sample
+    gyro_noise_std_rad_s: float = Field(default=0.0015, ge=0.0)  # white noise per sample
     gyro_bias_rad_s: float = Field(default=0.015, ge=-1.0, le=1.0)  # constant bias at start
     gyro_bias_walk_rad_s2: float = Field(default=0.0003, ge=0.0)  # bias random walk [rad/s/sqrt(s)]
 

@@ -181,10 +181,31 @@ class SlamEngine:
             moved_ok=ok,
         )
 
+    def _finalize_map(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int8]]:
+        """Let the mapper settle every piece of evidence once more; returns the cells that changed."""
+        self.mapper.finalize()
+        self._belief = self.mapper.states()
+        exported = classify(self._belief, self.frame.start_cell)
+        changed = np.nonzero(exported != self._exported)
+        self._exported = exported
+        return changed[0].astype(np.int64), changed[1].astype(np.int64), exported[changed]
+
     def _finish(self, result: StepResult, reason: str) -> StepResult:
         self.hw.stop()
         self.done = True
         self.stats.terminated_by = reason
+        rows, cols, states = self._finalize_map()
+        if rows.size:
+            # Merge with the step's own changes, the final state of each cell winning.
+            merged: dict[tuple[int, int], int] = {}
+            for r, c, s in zip(result.changed_rows, result.changed_cols, result.changed_states, strict=True):
+                merged[(int(r), int(c))] = int(s)
+            for r, c, s in zip(rows, cols, states, strict=True):
+                merged[(int(r), int(c))] = int(s)
+            keys = list(merged)
+            result.changed_rows = np.array([k[0] for k in keys], dtype=np.int64)
+            result.changed_cols = np.array([k[1] for k in keys], dtype=np.int64)
+            result.changed_states = np.array([merged[k] for k in keys], dtype=np.int8)
         result.done = True
         result.terminated_by = reason
         return result
@@ -235,11 +256,26 @@ class SlamEngine:
             return self._finish(result, "safety_cap")
         return result
 
-    def stop(self, reason: str = "stopped") -> None:
-        """End the run early; the map so far is kept."""
+    def stop(self, reason: str = "stopped") -> StepResult:
+        """End the run early; the map so far is kept. Returns the final cell changes."""
         self.hw.stop()
         self.done = True
         self.stats.terminated_by = reason
+        rows, cols, states = self._finalize_map()
+        return StepResult(
+            step=self.stats.steps,
+            t_s=self.hw.now(),
+            pose=self.pose,
+            action="stop",
+            target_xy=None,
+            changed_rows=rows,
+            changed_cols=cols,
+            changed_states=states,
+            sweep_ranges_m=self.last_sweep,
+            frontier_cells=0,
+            done=True,
+            terminated_by=reason,
+        )
 
 
 def start_pose_frame(grid_frame: MapFrame) -> Pose:

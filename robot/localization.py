@@ -24,7 +24,7 @@ from robot.world import Pose
 class LocalizationConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    gyro_noise_std_rad_s: float = Field(default=0.003, gt=0.0)  # per IMU sample
+    gyro_noise_std_rad_s: float = Field(default=0.0015, gt=0.0)  # per IMU sample
     yaw_rate_jump_std_rad_s: float = Field(default=2.0, gt=0.0)  # how much omega may change between ticks
     bias_walk_std_rad_s2: float = Field(default=0.0005, gt=0.0)  # process noise on the bias
     initial_bias_std_rad_s: float = Field(default=0.05, gt=0.0)

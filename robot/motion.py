@@ -22,7 +22,7 @@ from robot.localization import DeadReckoning, PoseEstimate, wrap_angle
 class MotionConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    tick_s: float = Field(default=0.1, gt=0.0, le=0.5)  # control period [s]
+    tick_s: float = Field(default=0.2, gt=0.0, le=0.5)  # control period [s]
     drive_speed_m_s: float = Field(default=0.2, gt=0.0)  # cruise rim speed
     turn_speed_m_s: float = Field(default=0.08, gt=0.0)  # rim speed when turning in place
     min_speed_m_s: float = Field(default=0.05, gt=0.0)  # creep speed near the goal
@@ -48,6 +48,8 @@ TickHook = Callable[[PoseEstimate], None]
 class DeadReckoningRecorder(Protocol):
     def dead_reckoning(self, counts: EncoderCounts, imu: list[ImuSample], driving: bool) -> None: ...
 
+    def origin(self, counts: EncoderCounts) -> None: ...
+
 
 class Pilot:
     """Executes turns and moves on hardware, keeping the dead-reckoning estimate current."""
@@ -68,7 +70,10 @@ class Pilot:
         self.on_tick = on_tick
         self.recorder = recorder
         self._driving = False
-        self.dr.reset_origin(hw.read_encoders())
+        origin = hw.read_encoders()
+        self.dr.reset_origin(origin)
+        if recorder is not None:
+            recorder.origin(origin)
         hw.read_imu()  # discard anything taken before the origin
 
     @property

@@ -3,6 +3,7 @@
 One record per line, fields separated by spaces, times in seconds, lengths in metres::
 
     # sonarslam-log 1 {"sonars": [...], "sonar": {...}, "frame": {...}}   (header: JSON metadata)
+    O <t> <left_counts> <right_counts>     where dead reckoning starts (once, first)
     I <t> <gyro_z_rad_s>                   an IMU sample
     E <t> <left_counts> <right_counts> <driving 0|1>
                                            encoder counts; a dead-reckoning update with the IMU
@@ -47,16 +48,21 @@ class SensorLogWriter:
             self._fh.write(line)
 
     def dead_reckoning(self, counts: EncoderCounts, imu: list[ImuSample], driving: bool) -> None:
+        # Full precision (repr) so that a replay reproduces the run bit for bit.
         for s in imu:
-            self._write(f"I {s.t_s:.4f} {s.gyro_z_rad_s:.6f}\n")
-        self._write(f"E {counts.t_s:.4f} {counts.left} {counts.right} {int(driving)}\n")
+            self._write(f"I {s.t_s!r} {s.gyro_z_rad_s!r}\n")
+        self._write(f"E {counts.t_s!r} {counts.left} {counts.right} {int(driving)}\n")
+
+    def origin(self, counts: EncoderCounts) -> None:
+        """The encoder counts and clock time that dead reckoning starts from."""
+        self._write(f"O {counts.t_s!r} {counts.left} {counts.right}\n")
 
     def sweep(self, sweep: SonarSweep) -> None:
-        self._write(f"S {sweep.t_s:.4f} " + " ".join(f"{r:.4f}" for r in sweep.ranges_m) + "\n")
+        self._write(f"S {float(sweep.t_s)!r} " + " ".join(repr(float(r)) for r in sweep.ranges_m) + "\n")
         self.flush()
 
     def contact(self, t_s: float, direction_rad: float) -> None:
-        self._write(f"B {t_s:.4f} {direction_rad:.6f}\n")
+        self._write(f"B {float(t_s)!r} {float(direction_rad)!r}\n")
 
     def flush(self) -> None:
         if self._fh is not None:
@@ -70,7 +76,7 @@ class SensorLogWriter:
 
 @dataclass(frozen=True)
 class LogRecord:
-    kind: str  # "I", "E", "S", "P", "B"
+    kind: str  # "O", "I", "E", "S", "P", "B"
     t_s: float
     values: tuple[float, ...]
 
@@ -99,7 +105,7 @@ def read_sensor_log(path: Path | str) -> tuple[dict[str, Any], Iterator[LogRecor
         fh.close()
         raise LogFormatError(f"{p}: line 1: header must be a JSON object")
 
-    arity = {"I": 1, "E": 3, "P": 3, "B": 1}
+    arity = {"I": 1, "E": 3, "P": 3, "B": 1, "O": 2}
 
     def records() -> Iterator[LogRecord]:
         with fh:
@@ -113,7 +119,7 @@ def read_sensor_log(path: Path | str) -> tuple[dict[str, Any], Iterator[LogRecor
                     nums = tuple(float(x) for x in parts[1:])
                 except ValueError:
                     raise LogFormatError(f"{p}: line {lineno}: non-numeric field in {kind!r} record") from None
-                if kind not in ("I", "E", "S", "P", "B"):
+                if kind not in ("I", "E", "S", "P", "B", "O"):
                     raise LogFormatError(f"{p}: line {lineno}: unknown record type {kind!r}")
                 if not nums or (kind in arity and len(nums) - 1 != arity[kind]) or (kind == "S" and len(nums) < 2):
                     raise LogFormatError(f"{p}: line {lineno}: wrong number of fields for a {kind!r} record")

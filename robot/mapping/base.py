@@ -49,6 +49,10 @@ class Mapper(Protocol):
         """The body touched something while driving towards ``direction_rad``."""
         ...
 
+    def finalize(self) -> None:
+        """Settle all evidence before the final map is read (the end of a run)."""
+        ...
+
     def passable(self) -> NDArray[np.bool_]:
         """Map cells the robot may drive into."""
         ...

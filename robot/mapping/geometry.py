@@ -32,6 +32,7 @@ class ConeCells:
     cols: NDArray[np.int64]
     dist_m: NDArray[np.float64]  # centre distance from the transducer
     off_axis_rad: NDArray[np.float64]  # signed angle from the beam axis
+    inset_m: NDArray[np.float64]  # how far inside the beam's side boundary the centre lies
 
 
 def place_beams(pose: Pose, ranges_m: NDArray[np.float64], robot: RobotConfig) -> list[Beam]:
@@ -84,14 +85,15 @@ def cone_cells(grid: GridSpec, beam: Beam, half_angle_rad: float, reach_m: float
     if c1 < c0 or iy1 < iy0:
         empty_i = np.zeros(0, dtype=np.int64)
         empty_f = np.zeros(0)
-        return ConeCells(empty_i, empty_i, empty_f, empty_f)
+        return ConeCells(empty_i, empty_i, empty_f, empty_f, empty_f)
     dx = (grid.origin_x + (np.arange(c0, c1 + 1) + 0.5) * res - beam.x)[None, :]
     dy = (grid.origin_y + (np.arange(iy0, iy1 + 1) + 0.5) * res - beam.y)[:, None]
     along = dx * c + dy * s
     lateral = dy * c - dx * s
     spread = np.maximum(np.abs(lateral) - half_ap, 0.0)
     dist = np.hypot(dx, dy)
-    inside = (along > 0) & (dist <= reach) & (spread <= along * math.tan(half_angle_rad))
+    inset = along * math.tan(half_angle_rad) - spread
+    inside = (along > 0) & (dist <= reach) & (inset >= 0)
     iy, ix = np.nonzero(inside)
     off = np.arctan2(spread[iy, ix], along[iy, ix]) * np.sign(lateral[iy, ix])
     return ConeCells(
@@ -99,4 +101,5 @@ def cone_cells(grid: GridSpec, beam: Beam, half_angle_rad: float, reach_m: float
         cols=(ix + c0).astype(np.int64),
         dist_m=dist[iy, ix],
         off_axis_rad=off,
+        inset_m=inset[iy, ix],
     )

@@ -46,7 +46,7 @@ class LogOddsParams(BaseModel):
     free_margin_frac: float = Field(default=0.01, ge=0.0)  # ... plus this share of the range
     carve_full_m: float = Field(default=0.8, gt=0.0)  # full free weight up to here ...
     carve_max_m: float = Field(default=2.0, gt=0.0)  # ... fading to zero here
-    no_echo_carve_m: float = Field(default=1.0, ge=0.0)  # how far a no-echo reading clears ...
+    no_echo_carve_m: float = Field(default=0.0, ge=0.0)  # how far a no-echo reading clears ...
     no_echo_weight: float = Field(default=0.5, ge=0.0, le=1.0)  # ... and how strongly
     max_echo_range_m: float = Field(default=2.0, gt=0.0)  # echoes beyond this are not mapped
     occ_full_m: float = Field(default=0.6, gt=0.0)  # full occupied weight up to here, then fading
@@ -57,10 +57,11 @@ class LogOddsParams(BaseModel):
     free_discount: float = Field(default=1.5, ge=0.0)  # arc share falls as exp(discount * free evidence)
     pad_m: float = Field(default=0.3, ge=0.0)  # evidence kept this far past the map's edge
     explain_rounds: int = Field(default=2, ge=0, le=10)  # explaining-away iterations
-    explain_gain: float = Field(default=1.0, ge=0.0)  # how strongly existing support attracts an echo
-    explain_cap: float = Field(default=5.0, gt=0.0)
+    explain_gain: float = Field(default=1.0, ge=0.0)  # share grows as exp(gain * support) ...
+    explain_cap: float = Field(default=5.0, gt=0.0)  # ... up to this support
     reattribute_every: int = Field(default=10, ge=1)  # sweeps between re-sharing every echo
     aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
+    free_inset_cells: float = Field(default=0.25, ge=0.0)  # a cleared cell lies this far inside the beam
     white_min_free: float = Field(default=0.7, gt=0.0, le=1.0)  # share of a map cell seen free to call it white
 
 
@@ -124,7 +125,6 @@ class LogOddsMapper:
         self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
         self._fine_cache: NDArray[np.int8] | None = None
-        self._last_logodds: NDArray[np.float32] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         self._outside = blocked_by_extent(frame)
         if frame.extent is not None:
@@ -147,8 +147,7 @@ class LogOddsMapper:
         p = self.params
         F = self.free_evidence
         half = self._half
-        # Occlusion uses the belief from before this sweep (one re-attribution per sweep, not two).
-        L = self._last_logodds if self._last_logodds is not None else self.logodds
+        L = self.logodds  # the belief before this sweep, for occlusion
         cols_n = self.fine.cols
         for beam in place_beams(pose, ranges_m, self.robot):
             r = beam.range_m
@@ -156,6 +155,11 @@ class LogOddsMapper:
             if mapped_echo:
                 free_to = r - p.free_margin_m - p.free_margin_frac * r
                 reach = r + self.fine.resolution
+            elif beam.echo:
+                # A far echo still clears the cone before it (the free weight fades out with range),
+                # but its arc is too wide and too noisy to place a surface.
+                free_to = min(r - p.free_margin_m - p.free_margin_frac * r, p.carve_max_m)
+                reach = free_to
             else:
                 free_to = min(p.no_echo_carve_m, r)
                 reach = free_to
@@ -163,7 +167,10 @@ class LogOddsMapper:
             if cells.rows.size == 0:
                 continue
             ang = (cells.off_axis_rad / half) ** 2
-            free = (cells.dist_m < free_to) & ~self._occluded(cells, L, free_to)
+            # Clear only cells lying wholly inside the beam: a cell whose centre is inside but whose
+            # corner pokes out may hold a chair leg the echo never saw.
+            inset = p.free_inset_cells * self.fine.resolution
+            free = (cells.dist_m < free_to) & (cells.inset_m >= inset) & ~self._occluded(cells, L, free_to)
             if np.any(free):
                 d = cells.dist_m[free]
                 fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
@@ -191,7 +198,7 @@ class LogOddsMapper:
             self._arcs.add(rows * cols_n + cols, prior, p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
         np.maximum(F, p.free_clamp, out=F)
         self._sweeps_since_full += 1
-        self._occ_cache = None
+        self._update_support(full=False)
 
     def _attribute(self, first_arc: int, support: NDArray[np.float64], rounds: int) -> NDArray[np.float64]:
         """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support``."""
@@ -214,37 +221,45 @@ class LogOddsMapper:
             )
         return support + own
 
-    def occupied_evidence(self, full: bool = False) -> NDArray[np.float32]:
-        """Every echo's evidence, shared over its arc by the free evidence gathered so far.
+    def _update_support(self, full: bool) -> None:
+        """Share the echoes' evidence: all of them every ``reattribute_every`` sweeps (or when
+        ``full``), otherwise only the new ones on top of the last full sharing.
 
-        Explaining away: an echo comes from the nearest surface, one place on its arc, so cells that
-        other echoes already put a surface in take the larger share. Re-sharing every echo is done
-        every ``reattribute_every`` sweeps (and for ``full``); in between, new echoes are shared on
-        top of the last re-sharing.
+        This runs at fixed points (the end of each sweep, and ``finalize``), never on a read, so the
+        map does not depend on when anyone looks at it.
         """
-        if self._occ_cache is not None and not full:
-            return self._occ_cache
         arcs = self._arcs
         p = self.params
-        stale = arcs.n_arcs - self._support_arcs
-        if arcs.n_arcs and (full or self._support is None or self._sweeps_since_full >= p.reattribute_every):
+        self._occ_cache = None
+        self._fine_cache = None
+        if not arcs.n_arcs:
+            return
+        if full or self._support is None or self._sweeps_since_full >= p.reattribute_every:
             self._support = self._attribute(0, np.zeros(self.fine.rows * self.fine.cols), p.explain_rounds)
             self._support_arcs = arcs.n_arcs
             self._sweeps_since_full = 0
             self._recent = self._support
-        elif stale > 0 and self._support is not None:
+        elif arcs.n_arcs > self._support_arcs:
             self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
-        occ = self.contact_evidence.copy()
-        if self._recent is not None:
-            occ += self._recent.reshape(occ.shape).astype(np.float32)
-        self._occ_cache = occ
-        return occ
+        self._occ_cache = None
+        self._fine_cache = None
+
+    def occupied_evidence(self) -> NDArray[np.float32]:
+        """Every echo's evidence, shared over its arc by the free evidence gathered so far.
+
+        Explaining away: an echo comes from the nearest surface, one place on its arc, so cells that
+        other echoes already put a surface in take the larger share.
+        """
+        if self._occ_cache is None:
+            occ = self.contact_evidence.copy()
+            if self._recent is not None:
+                occ += self._recent.reshape(occ.shape).astype(np.float32)
+            self._occ_cache = occ
+        return self._occ_cache
 
     @property
     def logodds(self) -> NDArray[np.float32]:
-        L = self.free_evidence + self.occupied_evidence()
-        self._last_logodds = L
-        return L
+        return self.free_evidence + self.occupied_evidence()
 
     def _occluded(self, cells: ConeCells, L: NDArray[np.float32], free_to: float) -> NDArray[np.bool_]:
         """Cone cells at or behind a cell already believed occupied.
@@ -281,7 +296,7 @@ class LogOddsMapper:
         rows, cols = self._disk(pose.x, pose.y, self.robot.radius_m)
         F = self.free_evidence
         F[rows, cols] = np.maximum(F[rows, cols] + self.params.l_body, self.params.free_clamp)
-        self._occ_cache = None
+        self._fine_cache = None
 
     def mark_contact(self, pose: Pose, direction_rad: float) -> None:
         d = self.robot.radius_m + 0.5 * self.fine.resolution
@@ -289,11 +304,15 @@ class LogOddsMapper:
         if self.fine.contains_index(r, c):
             self.contact_evidence[int(r), int(c)] += self.params.l_contact
             self._occ_cache = None
+            self._fine_cache = None
+
+    def finalize(self) -> None:
+        self._update_support(full=True)
 
     # -- belief -------------------------------------------------------------------------------
     def fine_states(self) -> NDArray[np.int8]:
         """Per evidence cell over the map's area (padding excluded): FREE, OCCUPIED or UNKNOWN."""
-        if self._occ_cache is not None and self._fine_cache is not None:
+        if self._fine_cache is not None:
             return self._fine_cache
         p = self.params
         L = self.logodds[self._inner]

@@ -87,6 +87,9 @@ class PaperMapper:
         if self.frame.grid.contains_index(r, c) and self._state[int(r), int(c)] != FREE:
             self._state[int(r), int(c)] = OCCUPIED
 
+    def finalize(self) -> None:
+        """The paper's rule is already final after every reading."""
+
     def passable(self) -> NDArray[np.bool_]:
         return self.states() == FREE
 

@@ -158,52 +158,51 @@ class SimRobot:
     def _advance(self, ticks: int, dt: float) -> None:
         noise = self.noise
         rng = self._rng
-        omega = np.array(self._cmd) / self.robot.wheel_radius_m  # wheel spin rates [rad/s]
-        moving = bool(np.any(omega != 0.0))
-        if moving:
-            slip = (
-                1.0 + noise.wheel_slip_std * rng.standard_normal((ticks, 2))
-                if noise.wheel_slip_std
-                else np.ones((ticks, 2))
-            )
-            ground = omega[None, :] * dt * self._radius_true[None, :] * slip  # (ticks, 2) wheel travel [m]
-            ds = ground.mean(axis=1)
-            dtheta = (ground[:, 1] - ground[:, 0]) / self.robot.wheel_base_m
-            theta_end = self._theta + np.cumsum(dtheta)
-            theta_mid = theta_end - dtheta / 2.0
-            xs = self._x + np.cumsum(ds * np.cos(theta_mid))
-            ys = self._y + np.cumsum(ds * np.sin(theta_mid))
+        wl, wr = self._cmd[0] / self.robot.wheel_radius_m, self._cmd[1] / self.robot.wheel_radius_m  # [rad/s]
+        # One batch of random numbers per call: slip for both wheels, gyro bias walk, gyro noise.
+        draws = rng.standard_normal((ticks, 4))
+        rate = [0.0] * ticks
+        if wl != 0.0 or wr != 0.0:
+            rl, rr = float(self._radius_true[0]), float(self._radius_true[1])
+            base = self.robot.wheel_base_m
+            slip = noise.wheel_slip_std
+            x, y, th = self._x, self._y, self._theta
+            xs, ys, ths, dss = [], [], [], []
+            for k in range(ticks):
+                gl = wl * dt * rl * (1.0 + slip * draws[k, 0])  # ground travel of each wheel [m]
+                gr = wr * dt * rr * (1.0 + slip * draws[k, 1])
+                ds = 0.5 * (gl + gr)
+                dth = (gr - gl) / base
+                mid = th + 0.5 * dth
+                x += ds * math.cos(mid)
+                y += ds * math.sin(mid)
+                th += dth
+                xs.append(x)
+                ys.append(y)
+                ths.append(th)
+                dss.append(abs(ds))
+                rate[k] = dth / dt
             ok = ticks
-            if np.any(ds != 0.0):
+            path_m = sum(dss)
+            if path_m > 0.0:
                 # Every tick lies within the path length of the end point, so a clear end point with
                 # that much to spare rules out a collision without checking each tick.
-                path_m = float(np.abs(ds).sum())
-                end_clear = _point_segment_distance(xs[-1:], ys[-1:], self._segments)[0]
+                end_clear = _point_segment_distance(np.array([x]), np.array([y]), self._segments)[0]
                 if end_clear < self.robot.radius_m + path_m:
-                    clearance = _point_segment_distance(xs, ys, self._segments)
+                    clearance = _point_segment_distance(np.array(xs), np.array(ys), self._segments)
                     hit = np.flatnonzero(clearance < self.robot.radius_m)
                     if hit.size:
                         ok = int(hit[0])  # the body stops at the last free tick; the wheels stall
                         self.collisions += ticks - ok
-            rate = dtheta / dt
-            if ok < ticks:
-                rate[ok:] = 0.0
+                        rate[ok:] = [0.0] * (ticks - ok)
             if ok > 0:
-                self._x, self._y, self._theta = float(xs[ok - 1]), float(ys[ok - 1]), float(theta_end[ok - 1])
-                self._theta = math.atan2(math.sin(self._theta), math.cos(self._theta))
-                self._wheel_angle += omega * dt * ok
-                self.odometer_m += float(np.abs(ds[:ok]).sum())
-        else:
-            rate = np.zeros(ticks)
+                self._x, self._y = xs[ok - 1], ys[ok - 1]
+                self._theta = math.atan2(math.sin(ths[ok - 1]), math.cos(ths[ok - 1]))
+                self._wheel_angle += np.array([wl, wr]) * dt * ok
+                self.odometer_m += float(sum(dss[:ok]))
         # Gyro: true yaw rate + slowly wandering bias + white noise, one sample per tick.
-        walk = (
-            noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * rng.standard_normal(ticks)
-            if noise.gyro_bias_walk_rad_s2
-            else np.zeros(ticks)
-        )
-        bias = self._gyro_bias + np.cumsum(walk)
+        bias = self._gyro_bias + np.cumsum(noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * draws[:, 2])
         self._gyro_bias = float(bias[-1])
-        white = noise.gyro_noise_std_rad_s * rng.standard_normal(ticks) if noise.gyro_noise_std_rad_s else 0.0
         self._imu_t.append(self._t + dt * np.arange(1, ticks + 1))
-        self._imu_w.append(rate + bias + white)
+        self._imu_w.append(np.asarray(rate) + bias + noise.gyro_noise_std_rad_s * draws[:, 3])
         self._t += dt * ticks
