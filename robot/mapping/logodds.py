@@ -62,6 +62,7 @@ class LogOddsParams(BaseModel):
     reattribute_every: int = Field(default=10, ge=1)  # sweeps between re-sharing every echo
     aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
     free_inset_cells: float = Field(default=0.25, ge=0.0)  # a cleared cell lies this far inside the beam
+    hit_depth_cells: float = Field(default=0.75, ge=0.0, le=3.0)  # the solid cell lies this far behind the echo
     white_min_free: float = Field(default=0.7, gt=0.0, le=1.0)  # share of a map cell seen free to call it white
 
 
@@ -154,7 +155,7 @@ class LogOddsMapper:
             mapped_echo = beam.echo and r <= p.max_echo_range_m
             if mapped_echo:
                 free_to = r - p.free_margin_m - p.free_margin_frac * r
-                reach = r + self.fine.resolution
+                reach = r + (p.hit_depth_cells + 0.5) * self.fine.resolution
             elif beam.echo:
                 # A far echo still clears the cone before it (the free weight fades out with range),
                 # but its arc is too wide and too noisy to place a surface.
@@ -181,11 +182,13 @@ class LogOddsMapper:
             if not mapped_echo:
                 continue
             # The surface is at r; the occupied cell is the one just behind it.
-            arc = (cells.dist_m >= r) & (cells.dist_m < r + self.fine.resolution)
+            depth = p.hit_depth_cells * self.fine.resolution
+            half_f = 0.5 * self.fine.resolution
+            arc = (cells.dist_m >= r + depth - half_f) & (cells.dist_m < r + depth + half_f)
             rows, cols = cells.rows[arc], cells.cols[arc]
             prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[arc]
-            ax = beam.x + (r + 0.5 * self.fine.resolution) * math.cos(beam.axis_rad)
-            ay = beam.y + (r + 0.5 * self.fine.resolution) * math.sin(beam.axis_rad)
+            ax = beam.x + (r + depth) * math.cos(beam.axis_rad)
+            ay = beam.y + (r + depth) * math.sin(beam.axis_rad)
             ar, ac = self.fine.world_to_index(ax, ay)
             if self.fine.contains_index(ar, ac):
                 rows = np.append(rows, int(ar))
