@@ -97,6 +97,7 @@ class SlamEngine:
         self._exported = frame.grid.empty()
         self._belief = frame.grid.empty()
         self._passable = np.zeros(frame.grid.shape, dtype=bool)
+        self._free_fraction = np.zeros(frame.grid.shape)
         self._started = False
         self.last_sweep: NDArray[np.float64] | None = None
         self.done = False
@@ -161,6 +162,7 @@ class SlamEngine:
     def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
         self._belief = self.mapper.states()
         self._passable = self.mapper.passable()
+        self._free_fraction = self.mapper.free_fraction()
         exported = classify(self._belief, self.frame.start_cell)
         changed = np.nonzero(exported != self._exported)
         if changed[0].size:
@@ -227,7 +229,7 @@ class SlamEngine:
 
         est = self.pose
         current = self.explorer.nav_cell_of(est.x, est.y)
-        action: Action = self.explorer.decide(current, est.theta, self._belief, self._passable)
+        action: Action = self.explorer.decide(current, est.theta, self._belief, self._passable, self._free_fraction)
         self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
         ok = True
         target_xy = None

@@ -48,6 +48,7 @@ class Explorer:
     block: int  # map cells per navigation cell side
     start_cell: tuple[int, int]  # navigation cell of the start
     max_inspections: int = 2
+    min_free_fraction: float = 0.25  # share of a navigation cell seen free before driving into it
     visited: NDArray[np.bool_] = field(init=False)
     bumped: NDArray[np.bool_] = field(init=False)
     stack: list[tuple[int, int]] = field(default_factory=list)
@@ -78,12 +79,17 @@ class Explorer:
         row = math.floor((g.origin_y + g.rows * g.resolution - y) / (g.resolution * b))
         return int(row), int(col)
 
-    def traversable(self, passable: NDArray[np.bool_]) -> NDArray[np.bool_]:
-        """Navigation cells whose map cells are all passable (cells past the grid count as walls)."""
+    def traversable(self, free_fraction: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Navigation cells with nothing occupied in them and at least a quarter seen free.
+
+        ``free_fraction`` is per map cell, negative where the cell holds an obstacle; cells past the
+        grid count as walls.
+        """
         b = self.block
-        padded = np.full((self.nav_rows * b, self.nav_cols * b), False)
-        padded[: self.grid.rows, : self.grid.cols] = passable
-        ok = padded.reshape(self.nav_rows, b, self.nav_cols, b).all(axis=(1, 3))
+        padded = np.full((self.nav_rows * b, self.nav_cols * b), -1.0)
+        padded[: self.grid.rows, : self.grid.cols] = free_fraction
+        blocks = padded.reshape(self.nav_rows, b, self.nav_cols, b)
+        ok = (blocks.min(axis=(1, 3)) >= 0.0) & (blocks.mean(axis=(1, 3)) >= self.min_free_fraction)
         return ok & ~self.bumped
 
     # -- decisions -------------------------------------------------------------------------------
@@ -116,11 +122,16 @@ class Explorer:
         return r, c
 
     def decide(
-        self, current: tuple[int, int], heading_rad: float, states: NDArray[np.int8], passable: NDArray[np.bool_]
+        self,
+        current: tuple[int, int],
+        heading_rad: float,
+        states: NDArray[np.int8],
+        passable: NDArray[np.bool_],
+        free_fraction: NDArray[np.float64],
     ) -> Action:
         """The next action from navigation cell ``current`` facing ``heading_rad``."""
         self.visited[current] = True
-        trav = self.traversable(passable)
+        trav = self.traversable(free_fraction)
         trav[current] = True  # the robot is standing in it
         first = direction_index(heading_rad)
         for k in range(8):

@@ -57,6 +57,10 @@ class Mapper(Protocol):
         """Map cells the robot may drive into."""
         ...
 
+    def free_fraction(self) -> NDArray[np.float64]:
+        """Per map cell, the share seen free; negative where something is believed occupied."""
+        ...
+
     def states(self) -> NDArray[np.int8]:
         """The map's own belief per cell: FREE, OCCUPIED or UNKNOWN (before reachability)."""
         ...

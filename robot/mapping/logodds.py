@@ -339,6 +339,11 @@ class LogOddsMapper:
         free_frac = np.mean(blocks == FREE, axis=(1, 3))
         return ~occ & (free_frac >= min_free_fraction) & ~self._outside
 
+    def free_fraction(self) -> NDArray[np.float64]:
+        blocks = self._blocks()
+        occ = np.any(blocks == OCCUPIED, axis=(1, 3)) | self._outside
+        return np.where(occ, -1.0, np.mean(blocks == FREE, axis=(1, 3)))
+
     def states(self) -> NDArray[np.int8]:
         grid = self.frame.grid
         k = self.k

@@ -93,6 +93,10 @@ class PaperMapper:
     def passable(self) -> NDArray[np.bool_]:
         return self.states() == FREE
 
+    def free_fraction(self) -> NDArray[np.float64]:
+        states = self.states()
+        return np.where(states == OCCUPIED, -1.0, (states == FREE).astype(float))
+
     def states(self) -> NDArray[np.int8]:
         out = self._state.copy()
         out[self._outside] = OCCUPIED

@@ -72,9 +72,7 @@ def _report(hw: Any, setup: PiSetup, duration_s: float, out: Callable[[str], Non
         )
     else:
         out("IMU: disabled in the config")
-    out(
-        f"turn each wheel forward by hand: its count should rise by {robot.encoder_counts_per_rev} per revolution"
-    )
+    out(f"turn each wheel forward by hand: its count should rise by {robot.encoder_counts_per_rev} per revolution")
     n = len(robot.sonars)
     answered = [False] * n
     hw.read_imu()  # drop samples taken during start-up
@@ -101,12 +99,16 @@ def _report(hw: Any, setup: PiSetup, duration_s: float, out: Callable[[str], Non
             break
     elapsed_s = hw.now() - start_s
     if hw.imu is not None:
-        out(f"IMU: {imu_count} samples in {elapsed_s:.1f} s ({imu_count / max(elapsed_s, 1e-9):.1f} Hz, "
-            f"configured {robot.imu.rate_hz:.0f} Hz)")
+        out(
+            f"IMU: {imu_count} samples in {elapsed_s:.1f} s ({imu_count / max(elapsed_s, 1e-9):.1f} Hz, "
+            f"configured {robot.imu.rate_hz:.0f} Hz)"
+        )
     silent = [i for i in range(n) if not answered[i]]
     if silent:
-        out(f"error: sonar{'s' if len(silent) > 1 else ''} {', '.join(map(str, silent))} never answered: "
-            f"{_wiring_hint(setup, silent)}")
+        out(
+            f"error: sonar{'s' if len(silent) > 1 else ''} {', '.join(map(str, silent))} never answered: "
+            f"{_wiring_hint(setup, silent)}"
+        )
         return EXIT_BAD_SETUP
     return EXIT_OK
 
