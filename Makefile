@@ -14,7 +14,7 @@ $(BIN)/.installed: pyproject.toml
 setup: $(BIN)/.installed
 
 run: setup
-	$(BIN)/sonarslam run --world room1 --out out/room1
+	$(BIN)/sonarslam serve
 
 lint: setup
 	$(BIN)/ruff check .

@@ -1,0 +1,293 @@
+"""Live map streaming: WebSocket bytes vs resending the grid, pose latency, and the cost of many viewers.
+
+Starts ``sonarslam serve`` as its own process on an ephemeral 127.0.0.1 port (so viewers and service do
+not share an interpreter) and prints three measurements:
+
+1. bytes: everything one viewer receives during a whole run, against the same messages carrying
+   the full grid at every step instead of the changed cells (target: <= 5 %);
+2. latency: step end on the server (``wall_time`` in each step) to arrival at a viewer, p50 / p99,
+   with 1 and 50 viewers (target: p99 < 50 ms on loopback);
+3. slowdown: wall time of a max-speed run with 50 viewers against none (target: < 10 %).
+
+    python benchmarks/ws_live.py [--only bytes|latency|slowdown] [--world room1] [--viewers 50]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import base64
+import json
+import os
+import queue
+import re
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+from websockets.asyncio.client import connect
+
+URL_LINE = re.compile(r"(http://127\.0\.0\.1:\d+)/")
+
+
+def cpu_seconds(pid: int, main_thread_only: bool = False) -> float:
+    """User + system CPU time of a process (or of its main thread: the service's event loop) so far."""
+    path = f"/proc/{pid}/task/{pid}/stat" if main_thread_only else f"/proc/{pid}/stat"
+    fields = Path(path).read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+SERVICE_PID: list[int] = []  # the running service's process id, for cpu_seconds()
+
+
+@contextmanager
+def service(data_dir: Path, **settings: str) -> Iterator[str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SONARSLAM_")}
+    env |= {"SONARSLAM_LOG_LEVEL": "warning", "SONARSLAM_MAX_CONCURRENT_RUNS": "1"}
+    env |= {f"SONARSLAM_{k.upper()}": v for k, v in settings.items()}
+    cmd = [sys.executable, "-m", "robot", "serve", "--port", "0", "--data-dir", str(data_dir)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    lines: queue.Queue[str] = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in proc.stdout or ()], daemon=True).start()
+    SERVICE_PID[:] = [proc.pid]
+    try:
+        url = None
+        while url is None:
+            match = URL_LINE.search(lines.get(timeout=30))
+            url = match.group(1) if match else None
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                if httpx.get(f"{url}/api/health", timeout=5).status_code == 200:
+                    break
+            except httpx.TransportError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)
+        yield url
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def start_run(url: str, world: str, **options: Any) -> str:
+    body = {"world": world, "speed": "max", "seed": 0, **options}
+    response = httpx.post(f"{url}/api/runs", json=body, timeout=30)
+    response.raise_for_status()
+    return str(response.json()["id"])
+
+
+def queued_run(url: str, world: str, **options: Any) -> str:
+    """A run that waits behind a short one (one slot): viewers connecting now see it from its first step."""
+    start_run(url, "room2", speed=0.5, max_steps=1)
+    run_id = start_run(url, world, **options)
+    assert httpx.get(f"{url}/api/runs/{run_id}", timeout=30).json()["status"] == "queued"
+    return run_id
+
+
+def wait_ended(url: str, run_id: str, timeout_s: float = 900.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        run = httpx.get(f"{url}/api/runs/{run_id}", timeout=30).json()
+        if run["status"] not in ("queued", "running"):
+            return dict(run)
+        time.sleep(0.25)
+    raise TimeoutError(run_id)
+
+
+def percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(values), q)) if values else float("nan")
+
+
+# -- 1. bytes --------------------------------------------------------------------------------------
+async def count_bytes(ws_url: str) -> dict[str, int]:
+    """Receive a whole run; size every message, and the same step messages carrying the full grid."""
+    totals = {"messages": 0, "ours": 0, "steps": 0, "merged": 0, "step_cells": 0, "full_b64": 0, "full_json": 0}
+    totals["grid"] = 0
+    grid: np.ndarray | None = None
+    async with connect(ws_url, max_size=None, compression=None) as ws:
+        async for raw in ws:
+            size = len(raw.encode() if isinstance(raw, str) else raw)
+            totals["messages"] += 1
+            totals["ours"] += size
+            msg = json.loads(raw)
+            if msg["type"] == "snapshot":
+                g = msg["grid"]
+                cells = np.frombuffer(base64.b64decode(msg["cells"]), dtype=np.uint8)
+                grid = cells.reshape(g["rows"], g["cols"]).copy()
+                totals["grid"] = grid.size
+            elif msg["type"] == "step" and grid is not None:
+                for r, c, code in msg["cells"]:
+                    grid[r, c] = code
+                n = msg.get("merged", 1)  # the baseline resends the grid for every engine step
+                totals["steps"] += n
+                totals["merged"] += n - 1
+                cells_size = len(json.dumps(msg["cells"], separators=(",", ":")))
+                totals["step_cells"] += cells_size
+                full_b64 = base64.b64encode(grid.tobytes()).decode()
+                totals["full_b64"] += n * (size - cells_size + len(full_b64) + 2)
+                ros = np.where(grid == 2, -1, np.where(grid == 1, 100, 0)).ravel().tolist()  # rosbridge's int8 list
+                totals["full_json"] += n * (size + len(json.dumps(ros, separators=(",", ":"))))
+            else:
+                totals["full_b64"] += size
+                totals["full_json"] += size
+    return totals
+
+
+def bench_bytes(url: str, world: str, resolutions: list[float]) -> None:
+    print(f"\n1. bytes over the WebSocket for a whole {world} run, one viewer, vs the full grid at every step")
+    for resolution in resolutions:
+        run_id = queued_run(url, world, resolution=resolution)
+        t = asyncio.run(count_bytes(f"{url.replace('http', 'ws')}/ws/runs/{run_id}"))
+        run = wait_ended(url, run_id)
+        full_grid_b64 = t["steps"] * ((t["grid"] + 2) // 3 * 4)
+        print(
+            f"   resolution {resolution} m ({t['grid']} cells), {t['steps']} steps ({run['terminated_by']}): "
+            f"sent {t['ours'] / 1e3:.1f} kB in {t['messages']} messages ({t['merged']} steps merged away)"
+        )
+        print(
+            f"     whole messages: {t['ours'] / 1e3:.1f} kB vs {t['full_b64'] / 1e3:.1f} kB with the grid (base64) "
+            f"in every step = {100 * t['ours'] / t['full_b64']:.1f} %; vs {t['full_json'] / 1e3:.1f} kB "
+            f"as a rosbridge-style int array = {100 * t['ours'] / t['full_json']:.1f} %"
+        )
+        print(
+            f"     map data only: {t['step_cells'] / 1e3:.1f} kB of cell changes vs {full_grid_b64 / 1e3:.1f} kB of "
+            f"full grids = {100 * t['step_cells'] / max(full_grid_b64, 1):.2f} %"
+        )
+
+
+# -- 2. latency ------------------------------------------------------------------------------------
+async def viewer_latencies(ws_url: str, out: list[float], counts: list[int]) -> None:
+    async with connect(ws_url, max_size=None, compression=None, max_queue=None) as ws:
+        n = 0
+        async for raw in ws:
+            now = time.time()
+            if isinstance(raw, str) and raw.startswith('{"type":"step"'):
+                at = raw.rfind('"wall_time":') + 12  # cheaper than parsing 50 copies of every message
+                end = min(i for i in (raw.find(",", at), raw.find("}", at)) if i > 0)
+                out.append(now - float(raw[at:end]))
+                n += 1
+        counts.append(n)
+
+
+async def watch_many(ws_url: str, viewers: int) -> tuple[list[float], list[int]]:
+    latencies: list[float] = []
+    counts: list[int] = []
+    await asyncio.gather(*(viewer_latencies(ws_url, latencies, counts) for _ in range(viewers)))
+    return latencies, counts
+
+
+def bench_latency(url: str, world: str, viewers: list[int], max_steps: int) -> None:
+    print(f"\n2. pose latency, step end on the server -> arrival at a viewer ({world}, max speed, {max_steps} steps)")
+    for n in viewers:
+        run_id = queued_run(url, world, max_steps=max_steps)
+        latencies, counts = asyncio.run(watch_many(f"{url.replace('http', 'ws')}/ws/runs/{run_id}", n))
+        run = wait_ended(url, run_id)
+        ms = [1e3 * v for v in latencies]
+        print(
+            f"   {n:3d} viewer(s): p50 {percentile(ms, 50):6.2f} ms, p99 {percentile(ms, 99):6.2f} ms, "
+            f"max {max(ms):6.1f} ms over {len(ms)} step messages "
+            f"({run['progress']['step']} steps in {run['wall_time_s']:.1f} s, min {min(counts)} steps per viewer)"
+        )
+
+
+# -- 3. slowdown -----------------------------------------------------------------------------------
+async def drain(url: str, path: str) -> int:
+    """A viewer that costs its own machine next to nothing: the handshake, then read and discard bytes.
+
+    (Real viewers are browsers on other machines; parsing 50 streams here would compete with the
+    service for this machine's cores and be counted as the service's slowdown.)"""
+    host, port = url.removeprefix("http://").split(":")
+    reader, writer = await asyncio.open_connection(host, int(port))
+    writer.write(
+        f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n".encode()
+    )
+    received = 0
+    while chunk := await reader.read(1 << 16):
+        received += len(chunk)
+    writer.close()
+    return received
+
+
+async def timed_run(url: str, world: str, viewers: int, max_steps: int) -> tuple[float, float, float]:
+    """The run's wall time, and the service's and its event loop's CPU time while it ran [s]."""
+    run_id = await asyncio.to_thread(queued_run, url, world, max_steps=max_steps)
+    viewing = [asyncio.create_task(drain(url, f"/ws/runs/{run_id}")) for _ in range(viewers)]
+    await asyncio.sleep(0.8)  # the viewers connect while the run waits its turn (about 2 s)
+    pid = SERVICE_PID[0]
+    cpu0, loop0 = cpu_seconds(pid), cpu_seconds(pid, main_thread_only=True)
+    await asyncio.gather(*viewing)
+    run = await asyncio.to_thread(wait_ended, url, run_id)
+    return float(run["wall_time_s"]), cpu_seconds(pid) - cpu0, cpu_seconds(pid, main_thread_only=True) - loop0
+
+
+def bench_slowdown(url: str, world: str, viewers: int, repeats: int, max_steps: int) -> None:
+    print(f"\n3. max-speed run wall time, {viewers} viewers vs none ({world}, {max_steps} steps, {repeats} pairs)")
+    alone: list[float] = []
+    watched: list[float] = []
+    cpu_alone: list[float] = []
+    cpu_watched: list[float] = []
+    loop_alone: list[float] = []
+    loop_watched: list[float] = []
+    for _ in range(repeats):  # alternate, so that drift in machine load hits both alike
+        wall, cpu, loop = asyncio.run(timed_run(url, world, 0, max_steps))
+        alone.append(wall)
+        cpu_alone.append(cpu)
+        loop_alone.append(loop)
+        wall, cpu, loop = asyncio.run(timed_run(url, world, viewers, max_steps))
+        watched.append(wall)
+        cpu_watched.append(cpu)
+        loop_watched.append(loop)
+    a, w = statistics.median(alone), statistics.median(watched)
+    ca, cw = statistics.median(cpu_alone), statistics.median(cpu_watched)
+    la, lw = statistics.median(loop_alone), statistics.median(loop_watched)
+    print(f"   no viewers: median {a:.2f} s, best {min(alone):.2f} s {sorted(round(x, 2) for x in alone)}")
+    print(f"   {viewers} viewers: median {w:.2f} s, best {min(watched):.2f} s {sorted(round(x, 2) for x in watched)}")
+    # Other work on the machine only ever adds time: the best of several runs is the steadiest figure.
+    print(f"   slowdown: {100 * (min(watched) / min(alone) - 1):+.1f} % (best), {100 * (w / a - 1):+.1f} % (median)")
+    # The engine and the event loop share one interpreter lock: the service's extra CPU time is the time
+    # the loop took from the run, whatever else the machine is doing.
+    print(f"   service CPU time: {ca:.2f} s alone, {cw:.2f} s with {viewers} viewers: {100 * (cw / ca - 1):+.1f} %")
+    print(
+        f"   event loop CPU time: {la:.2f} s alone, {lw:.2f} s with {viewers} viewers: the viewers cost the run "
+        f"{100 * (lw - la) / a:.1f} % of its wall time"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", choices=("bytes", "latency", "slowdown"), default=None)
+    parser.add_argument("--world", default="room1")
+    parser.add_argument("--viewers", type=int, default=50)
+    parser.add_argument("--steps", type=int, default=400, help="steps per latency / slowdown run")
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args(argv)
+    print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.2f}")
+    if args.only in (None, "bytes"):
+        # Every step to the viewer (no rate cap), so that nothing is saved by merging.
+        with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), ws_max_rate_hz="10000") as url:
+            bench_bytes(url, args.world, [0.2, 0.1])
+    with tempfile.TemporaryDirectory() as tmp, service(Path(tmp)) as url:
+        if args.only in (None, "latency"):
+            bench_latency(url, args.world, [1, args.viewers], args.steps)
+        if args.only in (None, "slowdown"):
+            bench_slowdown(url, args.world, args.viewers, args.repeats, args.steps)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

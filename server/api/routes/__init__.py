@@ -1,0 +1,1 @@
+"""One router per resource: health, worlds, config, runs and the live WebSocket."""

@@ -1,0 +1,174 @@
+"""Per-viewer bounded queues: a viewer that falls behind gets its pending steps merged, never blocks the run."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections import deque
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+TERMINAL_EVENTS = frozenset({"finished", "stopped", "error", "interrupted"})
+SHARED_MERGES = 64  # recent merged steps kept for other viewers
+
+
+def encode(message: dict[str, Any]) -> str:
+    return json.dumps(message, separators=(",", ":"), allow_nan=False)
+
+
+@dataclass
+class Outgoing:
+    """One wire message: the dict (for merging) and its JSON text, encoded once for every viewer."""
+
+    data: dict[str, Any]
+    text: str = ""
+    merged: bool = False  # data changed since text was made
+
+    @classmethod
+    def of(cls, data: dict[str, Any], text: str | None = None) -> Outgoing:
+        return cls(data, text if text is not None else encode(data))
+
+    @property
+    def kind(self) -> str:
+        return str(self.data["type"])
+
+    @property
+    def terminal(self) -> bool:
+        return self.kind == "status" and self.data.get("event") in TERMINAL_EVENTS
+
+    def wire(self) -> str:
+        if self.merged:
+            self.text = encode(self.data)
+            self.merged = False
+        return self.text
+
+
+def merge_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
+    """One ``step`` standing for several: the union of their cell changes (latest state per cell) and
+    the latest pose, sweep, target, progress and metrics; ``merged`` counts the steps it replaces."""
+    last = steps[-1]
+    cells: dict[tuple[int, int], int] = {}
+    count = 0
+    for s in steps:
+        for r, c, code in s["cells"]:
+            cells.pop((r, c), None)  # keep the order of the latest change
+            cells[(r, c)] = code
+        count += int(s.get("merged", 1))
+    out = dict(last)
+    out["cells"] = [[r, c, code] for (r, c), code in cells.items()]
+    out["merged"] = count
+    return out
+
+
+@dataclass(eq=False)  # compared and hashed by identity: a viewer is a viewer
+class Subscriber:
+    """A viewer's queue. Only the event loop touches it; ``put`` never waits."""
+
+    maxsize: int
+    items: deque[Outgoing] = field(default_factory=deque)
+    merges: int = 0  # how often this viewer fell behind
+    closed: bool = False
+    shared: dict[tuple[int, int], Outgoing] | None = None  # merged steps, shared by a run's viewers
+    _ready: asyncio.Event = field(default_factory=asyncio.Event)
+
+    def put(self, item: Outgoing) -> None:
+        if self.closed:
+            return
+        self.items.append(item)
+        if len(self.items) > self.maxsize:
+            self._compact()
+        self._ready.set()
+
+    def reset(self, snapshot: Outgoing) -> None:
+        """Replace everything pending by a fresh snapshot, which already includes it (a resync)."""
+        terminal = [i for i in self.items if i.terminal]
+        self.items.clear()
+        self.items.append(snapshot)
+        self.items.extend(terminal)
+        self._ready.set()
+
+    def fold(self, first: Outgoing) -> Outgoing:
+        """``first`` (a step about to be sent) merged with the steps queued right behind it."""
+        steps = [first.data]
+        while self.items and self.items[0].kind == "step":
+            steps.append(self.items.popleft().data)
+        if len(steps) == 1:
+            return first
+        self.merges += 1
+        if self.shared is None or any("merged" in s for s in steps):
+            return Outgoing(merge_steps(steps), merged=True)
+        # Viewers that keep pace fold the same steps: merge and encode them once for all.
+        key = (steps[0]["seq"], steps[-1]["seq"])
+        item = self.shared.get(key)
+        if item is None:
+            item = self.shared[key] = Outgoing.of(merge_steps(steps))
+            while len(self.shared) > SHARED_MERGES:
+                self.shared.pop(next(iter(self.shared)))
+        return item
+
+    def close(self, drop: bool = False) -> None:
+        """No more messages; what is queued is still delivered unless ``drop`` (the viewer has gone)."""
+        self.closed = True
+        if drop:
+            self.items.clear()
+        self._ready.set()
+
+    async def get(self) -> Outgoing | None:
+        """The next message, or None once the queue is closed."""
+        while not self.items:
+            if self.closed:
+                return None
+            self._ready.clear()
+            await self._ready.wait()
+        return self.items.popleft()
+
+    def _compact(self) -> None:
+        """Fold all pending steps into one; keep the newest status of each kind, the snapshot and a pong."""
+        self.merges += 1
+        pending = list(self.items)
+        steps = [i.data for i in pending if i.kind == "step"]
+        snapshot = next((i for i in reversed(pending) if i.kind == "snapshot"), None)
+        if snapshot is not None:
+            # Steps before the snapshot are already folded into it.
+            after = pending[pending.index(snapshot) + 1 :]
+            steps = [i.data for i in after if i.kind == "step"]
+        statuses: dict[str, Outgoing] = {}
+        for i in pending:
+            if i.kind == "status" and i.data.get("event") != "progress":
+                statuses.pop(str(i.data.get("event")), None)
+                statuses[str(i.data.get("event"))] = i
+        rest: Iterable[Outgoing] = (i for i in pending if i.kind not in ("step", "snapshot", "status"))
+        others = list(rest)[-1:]  # a pong
+        self.items.clear()
+        if snapshot is not None:
+            self.items.append(snapshot)
+        if steps:
+            self.items.append(Outgoing(merge_steps(steps), merged=True))
+        self.items.extend(sorted(statuses.values(), key=lambda i: i.terminal))
+        self.items.extend(others)
+
+
+class Broadcaster:
+    """Fans messages out to every viewer of one run; iterates over a copy so viewers may come and go."""
+
+    def __init__(self) -> None:
+        self.subscribers: set[Subscriber] = set()
+        self.shared_merges: dict[tuple[int, int], Outgoing] = {}
+
+    def add(self, sub: Subscriber) -> None:
+        sub.shared = self.shared_merges
+        self.subscribers.add(sub)
+
+    def remove(self, sub: Subscriber) -> None:
+        self.subscribers.discard(sub)
+        sub.close()
+
+    def publish(self, item: Outgoing) -> None:
+        for sub in tuple(self.subscribers):
+            sub.put(item)
+
+    def close_all(self) -> None:
+        for sub in tuple(self.subscribers):
+            sub.close()
+        self.subscribers.clear()

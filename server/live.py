@@ -1,0 +1,185 @@
+"""A run's live view on the event loop: the grid and pose as viewers see them, snapshots, and fan-out.
+
+The run thread never touches this object; it hands each step over with ``call_soon_threadsafe``. So the
+view changes only between messages, and a snapshot taken here is exactly the state after ``seq``:
+the steps a new viewer receives next continue it without gap or overlap.
+"""
+
+from __future__ import annotations
+
+import base64
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from robot.config import RobotConfig
+from robot.grid import GridSpec
+from server.broadcast import TERMINAL_EVENTS, Broadcaster, Outgoing, Subscriber
+
+PROTOCOL_VERSION = 1
+GREY = 2  # wire code of an unknown / inaccessible cell; white 0 and black 1 match the map states
+TRAIL_LENGTH = 5000
+PROGRESS_PERIOD_S = 1.0
+
+
+def state_codes(states: NDArray[np.int8]) -> NDArray[np.uint8]:
+    """Map states (-1 grey, 0 white, 1 black) as wire codes (2, 0, 1)."""
+    return np.where(states < 0, GREY, states).astype(np.uint8)
+
+
+def code_states(codes: NDArray[np.uint8]) -> NDArray[np.int8]:
+    return np.where(codes == GREY, -1, codes).astype(np.int8)
+
+
+def robot_view(robot: RobotConfig) -> dict[str, Any]:
+    return {
+        "radius_m": robot.radius_m,
+        "beam_width_deg": robot.sonar.beam_width_deg,
+        "max_range_m": robot.sonar.max_range_m,
+        "sonars": [m.model_dump() for m in robot.sonars],
+    }
+
+
+def grid_view(grid: GridSpec) -> dict[str, Any]:
+    return {
+        "rows": grid.rows,
+        "cols": grid.cols,
+        "resolution": grid.resolution,
+        "origin": [grid.origin_x, grid.origin_y],
+    }
+
+
+class LiveRun:
+    """What viewers of one run see, updated in step order on the event loop."""
+
+    def __init__(
+        self,
+        run: dict[str, Any],
+        grid: GridSpec,
+        robot: dict[str, Any] | None,
+        truth: NDArray[np.int8] | None,
+        queue_size: int,
+        status: str = "queued",
+    ) -> None:
+        self.run = dict(run)  # id, world, mapper, hardware, resolution, speed, seed
+        self.grid = grid
+        self.robot = robot  # as robot_view() gives it
+        self.truth_b64 = base64.b64encode(state_codes(truth).tobytes()).decode() if truth is not None else None
+        self.queue_size = queue_size
+        self.status = status
+        self.terminated_by: str | None = None
+        self.cells = np.full(grid.shape, GREY, dtype=np.uint8)
+        self.seq = 0
+        self.pose: dict[str, float] | None = None
+        self.trail: deque[list[float]] = deque(maxlen=TRAIL_LENGTH)
+        self.sweep: list[float] | None = None
+        self.target: list[float] | None = None
+        self.progress: dict[str, Any] = {"step": 0, "sim_time_s": 0.0, "explored": None, "frontier": None}
+        self.metrics: dict[str, Any] | None = None
+        self.terminal: Outgoing | None = None
+        self.broadcaster = Broadcaster()
+        self._last_progress = 0.0
+
+    # -- state ---------------------------------------------------------------------------------
+    def load(self, states: NDArray[np.int8], view: dict[str, Any]) -> None:
+        """Start from a checkpoint (a run that has ended): the map and the saved view state."""
+        self.cells = state_codes(states)
+        self.seq = int(view.get("seq", 0))
+        self.pose = view.get("pose")
+        self.trail.extend(view.get("trail", []))
+        self.sweep = view.get("sweep")
+        self.target = view.get("target")
+        self.progress = view.get("progress", self.progress)
+        self.metrics = view.get("metrics")
+
+    def states(self) -> NDArray[np.int8]:
+        """The map as viewers have it now (the live map.csv)."""
+        return code_states(self.cells)
+
+    @property
+    def ended(self) -> bool:
+        return self.terminal is not None
+
+    def snapshot(self) -> dict[str, Any]:
+        return {
+            "type": "snapshot",
+            "seq": self.seq,
+            "run": {**self.run, "status": self.status, "terminated_by": self.terminated_by},
+            "grid": grid_view(self.grid),
+            "cells": base64.b64encode(self.cells.tobytes()).decode(),
+            "truth": self.truth_b64,
+            "robot": self.robot,
+            "pose": self.pose,
+            "trail": list(self.trail),
+            "sweep": self.sweep,
+            "target": self.target,
+            "progress": self.progress,
+            "metrics": self.metrics,
+        }
+
+    # -- messages from the run thread ------------------------------------------------------------
+    def on_step(self, msg: dict[str, Any], text: str) -> None:
+        self.seq = msg["seq"]
+        if msg["cells"]:
+            changes = np.asarray(msg["cells"], dtype=np.int64)
+            self.cells[changes[:, 0], changes[:, 1]] = changes[:, 2]
+        self.pose = msg["pose"]
+        self.trail.append([msg["pose"]["x"], msg["pose"]["y"]])
+        self.sweep = msg["sweep"]
+        self.target = msg["target"]
+        self.progress = msg["progress"]
+        self.metrics = msg["metrics"]
+        self.broadcaster.publish(Outgoing(msg, text))
+        now = time.monotonic()
+        if now - self._last_progress >= PROGRESS_PERIOD_S:
+            self._last_progress = now
+            self.on_status("progress", progress=self.progress)
+
+    def on_status(self, event: str, **extra: Any) -> None:
+        """Publish a status event; ``started`` and the terminal events also change the run's status."""
+        if self.terminal is not None:
+            return
+        if event == "started":
+            self.status = "running"
+        elif event in TERMINAL_EVENTS:
+            self.status = event
+            self.terminated_by = extra.pop("terminated_by", self.terminated_by)
+            self.metrics = extra.get("metrics", self.metrics)
+        elif event == "speed":
+            self.run["speed"] = extra["speed"]
+        msg = {
+            "type": "status",
+            "seq": self.seq,
+            "event": event,
+            "status": self.status,
+            "terminated_by": self.terminated_by,
+            **extra,
+        }
+        item = Outgoing.of(msg)
+        if event in TERMINAL_EVENTS:
+            self.terminal = item
+        self.broadcaster.publish(item)
+
+    # -- viewers ---------------------------------------------------------------------------------
+    def subscribe(self) -> Subscriber:
+        """A new viewer: its queue starts with a snapshot (and the closing status if the run has ended)."""
+        sub = Subscriber(self.queue_size)
+        sub.put(Outgoing.of(self.snapshot()))
+        if self.terminal is not None:
+            sub.put(self.terminal)
+        else:
+            self.broadcaster.add(sub)
+        return sub
+
+    def resync(self, sub: Subscriber) -> None:
+        sub.reset(Outgoing.of(self.snapshot()))
+
+    def unsubscribe(self, sub: Subscriber) -> None:
+        self.broadcaster.remove(sub)
+
+    @property
+    def viewers(self) -> int:
+        return len(self.broadcaster.subscribers)

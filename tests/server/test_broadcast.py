@@ -1,0 +1,110 @@
+"""Per-viewer queues: a viewer that falls behind gets its pending steps merged, in order, without gaps."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from live_client import run_async
+
+from server.broadcast import Broadcaster, Outgoing, Subscriber, merge_steps
+
+
+def step(seq: int, cells: list[list[int]]) -> dict[str, Any]:
+    pose = {"x": float(seq), "y": 0.0, "theta": 0.0}
+    return {"type": "step", "seq": seq, "step": seq, "cells": cells, "pose": pose, "progress": {"step": seq}}
+
+
+def status(event: str, seq: int) -> dict[str, Any]:
+    return {"type": "status", "seq": seq, "event": event}
+
+
+def drain(sub: Subscriber) -> list[dict[str, Any]]:
+    async def run() -> list[dict[str, Any]]:
+        sub.close()
+        out = []
+        while (item := await sub.get()) is not None:
+            out.append(item.data)
+        return out
+
+    return run_async(run())
+
+
+def test_merging_keeps_the_latest_state_of_each_cell_in_order() -> None:
+    merged = merge_steps([step(5, [[1, 1, 0], [2, 2, 1]]), step(6, [[1, 1, 1]]), step(7, [[3, 3, 2]])])
+    assert merged["seq"] == 7 and merged["merged"] == 3 and merged["pose"]["x"] == 7.0
+    assert merged["cells"] == [[2, 2, 1], [1, 1, 1], [3, 3, 2]]
+    again = merge_steps([merged, step(8, [[2, 2, 0]])])
+    assert again["merged"] == 4 and again["seq"] == 8
+    assert again["cells"] == [[1, 1, 1], [3, 3, 2], [2, 2, 0]]
+
+
+def test_a_full_queue_folds_its_steps_and_stays_bounded() -> None:
+    sub = Subscriber(maxsize=4)
+    sub.put(Outgoing.of(step(1, [[0, 0, 0]])))
+    sub.put(Outgoing.of(status("started", 1)))
+    for seq in range(2, 200):
+        sub.put(Outgoing.of(step(seq, [[seq % 5, 0, seq % 3]])))
+        sub.put(Outgoing.of(status("progress", seq)))
+        assert len(sub.items) <= 4
+    sub.put(Outgoing.of(status("finished", 199)))
+    out = drain(sub)
+    steps = [m for m in out if m["type"] == "step"]
+    assert steps[-1]["seq"] == 199
+    assert sum(m.get("merged", 1) for m in steps) == 199  # every step is accounted for, no gap
+    assert out[-1]["event"] == "finished"
+    assert sub.merges > 0
+    grid = {}
+    for m in steps:
+        for r, c, code in m["cells"]:
+            grid[(r, c)] = code
+    expected = {}
+    for seq in range(1, 200):
+        expected[(0, 0) if seq == 1 else (seq % 5, 0)] = 0 if seq == 1 else seq % 3
+    assert grid == expected
+
+
+def test_a_pending_snapshot_absorbs_the_steps_before_it() -> None:
+    sub = Subscriber(maxsize=3)
+    sub.put(Outgoing.of(step(1, [[0, 0, 1]])))
+    sub.put(Outgoing.of({"type": "snapshot", "seq": 1}))
+    for seq in range(2, 6):
+        sub.put(Outgoing.of(step(seq, [[seq, 0, 1]])))
+    out = drain(sub)
+    assert [m["type"] for m in out] == ["snapshot", "step"]
+    assert out[1]["seq"] == 5 and out[1]["merged"] == 4
+
+
+def test_resync_replaces_the_backlog_but_keeps_the_closing_status() -> None:
+    sub = Subscriber(maxsize=10)
+    for seq in range(1, 4):
+        sub.put(Outgoing.of(step(seq, [])))
+    sub.put(Outgoing.of(status("stopped", 3)))
+    sub.reset(Outgoing.of({"type": "snapshot", "seq": 3}))
+    assert [m["type"] for m in drain(sub)] == ["snapshot", "status"]
+
+
+def test_a_closed_or_slow_viewer_does_not_affect_the_others() -> None:
+    hub = Broadcaster()
+    slow, fast, gone = Subscriber(2), Subscriber(1000), Subscriber(2)
+    for sub in (slow, fast, gone):
+        hub.add(sub)
+    hub.remove(gone)
+    for seq in range(1, 101):
+        hub.publish(Outgoing.of(step(seq, [])))
+    assert len(fast.items) == 100 and len(slow.items) <= 2 and not gone.items
+    assert [m["seq"] for m in drain(fast)] == list(range(1, 101))
+
+
+def test_viewers_that_keep_pace_share_one_merged_message() -> None:
+    hub = Broadcaster()
+    a, b = Subscriber(100), Subscriber(100)
+    hub.add(a)
+    hub.add(b)
+    for seq in range(1, 5):
+        hub.publish(Outgoing.of(step(seq, [[seq, 0, 1]])))
+    first_a, first_b = a.items.popleft(), b.items.popleft()
+    merged_a, merged_b = a.fold(first_a), b.fold(first_b)
+    assert merged_a is merged_b  # merged and encoded once
+    assert merged_a.data["seq"] == 4 and merged_a.data["merged"] == 4
+    assert '"merged":4' in merged_a.wire()
+    assert not a.items and not b.items
