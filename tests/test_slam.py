@@ -1,0 +1,232 @@
+"""The SLAM core: dead reckoning, the mappers, the explorer and the step engine."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from robot.config import RobotConfig, SimNoise
+from robot.engine import SlamEngine, classify
+from robot.errors import ConfigError
+from robot.explore import CLOCKWISE, Explorer, direction_index
+from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from robot.hardware import EncoderCounts, ImuSample
+from robot.localization import DeadReckoning
+from robot.mapping import make_mapper
+from robot.mapping.base import MapFrame
+from robot.metrics import score
+from robot.runner import frame_for_world, simulate
+from robot.settings import load_run_config
+from robot.slam_config import SlamConfig
+from robot.truth import truth_grid
+from robot.world import Pose, world_from_dict
+
+ROBOT = RobotConfig()
+
+
+def small_world(obstacles=()):
+    return world_from_dict(
+        {
+            "name": "small",
+            "boundary": [[0.0, 0.0], [2.0, 0.0], [2.0, 1.6], [0.0, 1.6]],
+            "start": {"x": 0.3, "y": 0.3, "theta_deg": 90.0},
+            "obstacles": list(obstacles),
+        },
+        "small.toml",
+    )
+
+
+# -- dead reckoning ----------------------------------------------------------------------------
+def test_standing_still_teaches_the_filter_the_gyro_bias() -> None:
+    dr = DeadReckoning(ROBOT, Pose(0.0, 0.0, 0.0))
+    dr.reset_origin(EncoderCounts(0.0, 0, 0))
+    rng = np.random.default_rng(0)
+    t = 0.0
+    for _ in range(100):  # 10 s still, a biased noisy gyro
+        samples = [ImuSample(t + 0.01 * (i + 1), 0.02 + 0.0015 * rng.standard_normal()) for i in range(10)]
+        t += 0.1
+        est = dr.update(EncoderCounts(t, 0, 0), samples, wheels_commanded=False)
+    assert est.bias == pytest.approx(0.02, abs=0.002)
+    assert abs(est.theta) < math.radians(0.5)
+
+
+def test_heading_follows_the_gyro_through_a_turn() -> None:
+    dr = DeadReckoning(ROBOT, Pose(0.0, 0.0, 0.0))
+    dr.reset_origin(EncoderCounts(0.0, 0, 0))
+    rate = 1.0  # rad/s, counter-clockwise
+    t = 0.0
+    counts = 0.0
+    for _ in range(10):  # 1 s of turning in place: the wheels turn in opposite directions
+        samples = [ImuSample(t + 0.01 * (i + 1), rate) for i in range(10)]
+        t += 0.1
+        counts += rate * 0.1 * ROBOT.wheel_base_m / 2 / ROBOT.metres_per_count
+        est = dr.update(EncoderCounts(t, -int(counts), int(counts)), samples, wheels_commanded=True)
+    assert est.theta == pytest.approx(1.0, abs=0.01)
+    assert math.hypot(est.x, est.y) < 0.01
+
+
+def test_encoder_slip_against_the_gyro_is_flagged_and_down_weighted() -> None:
+    dr = DeadReckoning(ROBOT, Pose(0.0, 0.0, 0.0))
+    dr.reset_origin(EncoderCounts(0.0, 0, 0))
+    t = 0.0
+    left = right = 0
+    for _ in range(10):  # the right wheel spins 3x faster (slipping); the gyro says straight
+        samples = [ImuSample(t + 0.01 * (i + 1), 0.0) for i in range(10)]
+        t += 0.1
+        left += 5
+        right += 15
+        est = dr.update(EncoderCounts(t, left, right), samples, wheels_commanded=True)
+    assert dr.slip_events >= 5
+    assert abs(est.theta) < math.radians(2.0)
+
+
+def test_driving_straight_integrates_encoder_distance_along_the_heading() -> None:
+    dr = DeadReckoning(ROBOT, Pose(1.0, 2.0, math.pi / 2))
+    dr.reset_origin(EncoderCounts(0.0, 0, 0))
+    n = 0
+    for k in range(1, 11):
+        n += 5
+        dr.update(EncoderCounts(0.1 * k, n, n), [ImuSample(0.1 * k, 0.0)], wheels_commanded=True)
+    est = dr.estimate
+    assert est.x == pytest.approx(1.0, abs=1e-6)
+    assert est.y == pytest.approx(2.0 + 50 * ROBOT.metres_per_count, abs=1e-6)
+
+
+# -- mappers -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("mapper_name", ["logodds", "paper"])
+def test_a_wall_seen_head_on_is_occupied_and_the_space_before_it_free(mapper_name: str) -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)  # 2 x 2 m, no known extent
+    frame = MapFrame(grid=grid, start=Pose(0.3, 1.0, 0.0), extent=None)
+    mapper = make_mapper(mapper_name, frame, ROBOT, SlamConfig(mapper=mapper_name))
+    # A wall at x = 1.5 seen from several vantage points along y, the front sonar pointing at it.
+    for y in np.arange(0.5, 1.6, 0.1):
+        pose = Pose(0.5, float(y), 0.0)
+        ranges = np.full(8, ROBOT.sonar.max_range_m)
+        ranges[0] = 1.5 - 0.5 - ROBOT.sonars[0].offset_x_m
+        for _ in range(3):
+            mapper.integrate(pose, ranges)
+    states = mapper.states()
+    row = grid.world_to_index(0.5, 1.0)[0]
+    wall_col = int(grid.world_to_index(1.55, 1.0)[1])
+    assert states[row, wall_col] == OCCUPIED
+    assert all(states[row, c] == FREE for c in range(int(grid.world_to_index(0.9, 1.0)[1]), wall_col - 1))
+
+
+def test_a_no_echo_reading_clears_nothing() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(0.3, 1.0, 0.0), extent=None)
+    mapper = make_mapper("logodds", frame, ROBOT, SlamConfig())
+    for _ in range(10):
+        mapper.integrate(Pose(0.3, 1.0, 0.0), np.full(8, ROBOT.sonar.max_range_m))
+    assert np.all(mapper.states() == UNKNOWN)
+
+
+def test_the_log_odds_map_does_not_depend_on_when_it_is_read() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    rng = np.random.default_rng(3)
+    sweeps = [(Pose(*rng.uniform(0.5, 1.5, 2), rng.uniform(-3, 3)), rng.uniform(0.1, 2.0, 8)) for _ in range(30)]
+    a = make_mapper("logodds", frame, ROBOT, SlamConfig())
+    b = make_mapper("logodds", frame, ROBOT, SlamConfig())
+    for i, (pose, ranges) in enumerate(sweeps):
+        a.integrate(pose, ranges)
+        b.integrate(pose, ranges)
+        if i % 3 == 0:
+            b.states()  # an extra look at b only
+    assert np.array_equal(a.states(), b.states())
+
+
+def test_classify_reads_the_belief_like_the_ground_truth() -> None:
+    belief = np.array(
+        [
+            [OCCUPIED, OCCUPIED, OCCUPIED, UNKNOWN],
+            [FREE, FREE, OCCUPIED, FREE],
+            [FREE, UNKNOWN, OCCUPIED, FREE],
+        ],
+        dtype=np.int8,
+    )
+    exported = classify(belief, (1, 0))
+    expected = np.array([[1, 1, 1, -1], [0, 0, 1, -1], [0, 1, 1, -1]], dtype=np.int8)
+    assert np.array_equal(exported, expected)
+
+
+# -- exploration -------------------------------------------------------------------------------
+def test_neighbours_are_tried_clockwise_starting_from_the_heading() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 5, 5)
+    explorer = Explorer(grid, 1, (2, 2))
+    free = np.ones(grid.shape)
+    states = np.zeros(grid.shape, dtype=np.int8)
+    first = explorer.decide((2, 2), math.radians(0.0), states, states == FREE, free)  # facing east
+    assert first.kind == "move" and first.target == (2, 3)
+    assert CLOCKWISE[direction_index(math.radians(0.0))] == (0, 1)
+    second = explorer.decide((2, 3), math.radians(0.0), states, states == FREE, free)
+    assert second.target == (2, 4)
+
+
+def test_a_dead_end_backtracks_to_the_cell_it_came_from() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 3, 3)
+    explorer = Explorer(grid, 1, (1, 0))
+    free = np.full(grid.shape, -1.0)
+    free[1, :] = 1.0  # a one-cell corridor along row 1
+    states = np.where(free > 0, FREE, OCCUPIED).astype(np.int8)
+    assert explorer.decide((1, 0), 0.0, states, free > 0, free).target == (1, 1)
+    assert explorer.decide((1, 1), 0.0, states, free > 0, free).target == (1, 2)
+    back = explorer.decide((1, 2), 0.0, states, free > 0, free)
+    assert back.kind == "move" and back.target == (1, 1) and back.reason == "backtrack"
+
+
+def test_config_refuses_settings_that_cannot_work() -> None:
+    with pytest.raises(ConfigError, match="finer than the evidence grid"):
+        load_run_config(None, {"resolution": 0.03})
+    with pytest.raises(ConfigError, match="smaller than the robot"):
+        load_run_config(None, {"resolution": 0.05, "nav_cell_min_m": 0.05})
+
+
+# -- the engine --------------------------------------------------------------------------------
+def test_an_exact_robot_maps_a_small_room_and_says_why_it_stopped() -> None:
+    world = small_world([{"shape": "rect", "center": [1.3, 0.9], "size": [0.4, 0.3], "angle_deg": 0.0}])
+    cfg = load_run_config()
+    result = simulate(world, cfg.robot, SimNoise.off(), cfg.slam, seed=0)
+    assert result.terminated_by == "complete"
+    assert result.metrics.recall >= 0.95
+    assert result.metrics.f1 >= 0.9
+    assert result.final_xy_error_m < 0.02
+
+
+def test_step_deltas_rebuild_the_exported_map() -> None:
+    world = small_world()
+    cfg = load_run_config()
+    from robot.sim import SimRobot
+
+    sim = SimRobot(world, cfg.robot, SimNoise(), seed=4)
+    engine = SlamEngine(sim, cfg.robot, cfg.slam, frame_for_world(world, 0.2))
+    rebuilt = np.full(engine.map_states().shape, UNKNOWN, dtype=np.int8)
+    steps = 0
+    while not engine.done:
+        step = engine.step()
+        rebuilt[step.changed_rows, step.changed_cols] = step.changed_states
+        steps += 1
+        assert steps < 2000
+    assert np.array_equal(rebuilt, engine.map_states())
+    _, truth = truth_grid(world, 0.2)
+    assert score(rebuilt, truth).f1 > 0.85
+
+
+def test_stopping_early_keeps_the_partial_map() -> None:
+    world = small_world()
+    cfg = load_run_config()
+    from robot.sim import SimRobot
+
+    sim = SimRobot(world, cfg.robot, SimNoise(), seed=1)
+    engine = SlamEngine(sim, cfg.robot, cfg.slam, frame_for_world(world, 0.2))
+    rebuilt = np.full(engine.map_states().shape, UNKNOWN, dtype=np.int8)
+    for _ in range(5):
+        step = engine.step()
+        rebuilt[step.changed_rows, step.changed_cols] = step.changed_states
+    final = engine.stop()
+    rebuilt[final.changed_rows, final.changed_cols] = final.changed_states
+    assert engine.done and engine.stats.terminated_by == "stopped"
+    assert np.array_equal(rebuilt, engine.map_states())
+    assert (rebuilt == FREE).sum() > 0
