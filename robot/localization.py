@@ -29,7 +29,7 @@ class LocalizationConfig(BaseModel):
     bias_walk_std_rad_s2: float = Field(default=0.0005, gt=0.0)  # process noise on the bias
     initial_bias_std_rad_s: float = Field(default=0.05, gt=0.0)
     zero_rate_std_rad_s: float = Field(default=0.0005, gt=0.0)  # wheels still => omega ~ 0
-    encoder_rate_std_floor_rad_s: float = Field(default=0.5, gt=0.0)  # least doubt in an encoder yaw rate
+    encoder_rate_std_floor_rad_s: float = Field(default=0.001, gt=0.0)  # least doubt in an encoder yaw rate
     slip_gate_sigma: float = Field(default=3.0, gt=0.0)  # disagreement that counts as slip [std-devs]
     slip_inflation: float = Field(default=100.0, ge=1.0)  # encoder variance factor under slip
 
@@ -114,8 +114,9 @@ class DeadReckoning:
         kf.predict()
 
         enc_rate = (dr - dl) / self.robot.wheel_base_m / dt
-        # Two uniform one-count errors, and never better than the floor: over a short tick the counts
-        # lag the wheels, and a biased encoder rate must not teach the filter a gyro bias.
+        # Two uniform one-count errors, and never better than the floor. (Over a short turn the counts
+        # lag the wheels and nudge the bias estimate; a 0.5 rad/s floor removed that but, measured over
+        # whole runs, lost more than it gained: 3.9 cm against 2.3 cm of final position error.)
         enc_var = max((self._enc_yaw_quantum / dt) ** 2 / 3.0, cfg.encoder_rate_std_floor_rad_s**2)
         if imu:
             gyro_rate = float(np.mean([s.gyro_z_rad_s for s in imu]))
