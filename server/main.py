@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import fcntl
 import logging
+import re
 import socket
 import sys
 import uuid
@@ -29,6 +30,22 @@ from server.store import RunStore
 from server.worlds import WorldCatalog
 
 log = logging.getLogger("sonarslam.server")
+
+_TOKEN_IN_QUERY = re.compile(r"(token=)[^&\s\"']+")
+
+
+class RedactTokens(logging.Filter):
+    """Keep bearer tokens that arrive in a URL's query string (``?token=...``) out of the access log."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.args:
+            record.args = tuple(
+                _TOKEN_IN_QUERY.sub(r"\1[redacted]", a) if isinstance(a, str) else a for a in record.args
+            )
+        if isinstance(record.msg, str):
+            record.msg = _TOKEN_IN_QUERY.sub(r"\1[redacted]", record.msg)
+        return True
+
 
 PLACEHOLDER_PAGE = """<!doctype html><meta charset="utf-8"><title>sonarslam</title>
 <h1>sonarslam</h1><p>The live page is not installed (no <code>web/index.html</code>).
@@ -175,6 +192,8 @@ def serve(args: argparse.Namespace) -> int:
         lifespan="on",
     )
     server = uvicorn.Server(config)
+    for name in ("uvicorn.access", "uvicorn.error"):
+        logging.getLogger(name).addFilter(RedactTokens())
     try:
         server.run(sockets=[sock])
     finally:

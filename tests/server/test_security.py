@@ -136,3 +136,23 @@ def test_bad_settings_fail_at_start_up_with_one_line(tmp_path: Any, monkeypatch:
     )
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "port" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_tokens_in_query_strings_are_redacted_from_the_log() -> None:
+    import logging
+
+    from server.main import RedactTokens
+
+    record = logging.LogRecord(
+        "uvicorn.access",
+        logging.INFO,
+        __file__,
+        1,
+        '%s - "%s %s HTTP/%s" %d',
+        ("127.0.0.1:5000", "GET", "/ws/runs/r-1?token=s3cret-token&x=1", "1.1", 200),
+        None,
+    )
+    RedactTokens().filter(record)
+    line = record.getMessage()
+    assert "s3cret-token" not in line
+    assert "token=[redacted]&x=1" in line
