@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from robot.boxfix import box_fix
 from robot.config import RobotConfig
 from robot.explore import Action, Explorer
 from robot.hardware import Hardware
@@ -127,6 +128,9 @@ class SlamEngine:
         sweep, est = self.pilot.sweep()
         if self.recorder is not None:
             self.recorder.sweep(sweep)
+        dx, dy = box_fix(self.frame, self.robot, est.as_pose(), sweep.ranges_m, self.config.box_fix)
+        if dx or dy:
+            est = self.dead_reckoning.shift_position(dx, dy)
         self.mapper.integrate(est.as_pose(), sweep.ranges_m)
         self.mapper.mark_body(est.as_pose())
         self.last_sweep = sweep.ranges_m

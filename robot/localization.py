@@ -77,6 +77,12 @@ class DeadReckoning:
             self._x, self._y, wrap_angle(float(x[0])), math.sqrt(max(self._kf.P[0, 0], 0.0)), float(x[2])
         )
 
+    def shift_position(self, dx: float, dy: float) -> PoseEstimate:
+        """Move the position estimate by an external fix [m]."""
+        self._x += dx
+        self._y += dy
+        return self.estimate
+
     def reset_origin(self, counts: EncoderCounts) -> None:
         """Take the current counts as the reference (call once before the first update)."""
         self._last_counts = (counts.left, counts.right)

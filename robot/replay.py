@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ValidationError
 
+from robot.boxfix import box_fix
 from robot.config import CONFIG_DIR, RobotConfig, format_validation_error
 from robot.engine import classify
 from robot.errors import ConfigError, LogFormatError
@@ -235,6 +236,9 @@ def replay_sensor_log(
                     f"{path}: sweep at t={rec.t_s:.4f} s has {len(rec.values)} ranges; "
                     f"the header lists {n_sonars} sonars"
                 )
+            dx, dy = box_fix(frame, robot, pose, rec.ranges, slam.box_fix)  # as the engine does
+            if dx or dy:
+                pose = dr.shift_position(dx, dy).as_pose()
             mapper.integrate(pose, rec.ranges)
             mapper.mark_body(pose)
             sweeps.append((rec.t_s, pose.x, pose.y, pose.theta))

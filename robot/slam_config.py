@@ -8,6 +8,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from robot.boxfix import BoxFixConfig
 from robot.config import CONFIG_DIR, RobotConfig, format_validation_error, read_toml
 from robot.errors import ConfigError
 from robot.localization import LocalizationConfig
@@ -32,6 +33,7 @@ class SlamConfig(BaseModel):
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()
     localization: LocalizationConfig = LocalizationConfig()
+    box_fix: BoxFixConfig = BoxFixConfig()
 
     def nav_block(self, robot: RobotConfig) -> int:
         """Map cells per navigation-cell side: enough to hold the body and its turning circle."""

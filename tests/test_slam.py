@@ -191,8 +191,9 @@ def test_an_exact_robot_maps_a_small_room_and_says_why_it_stopped() -> None:
     cfg = load_run_config()
     result = simulate(world, cfg.robot, SimNoise.off(), cfg.slam, seed=0)
     assert result.terminated_by == "complete"
+    # 80 cells of which only 9 are non-vacant: a handful of wrong cells next to the walls at most.
     assert result.metrics.recall >= 0.95
-    assert result.metrics.f1 >= 0.9
+    assert result.metrics.cell_errors <= 4
     assert result.final_xy_error_m < 0.02
 
 
@@ -212,7 +213,7 @@ def test_step_deltas_rebuild_the_exported_map() -> None:
         assert steps < 2000
     assert np.array_equal(rebuilt, engine.map_states())
     _, truth = truth_grid(world, 0.2)
-    assert score(rebuilt, truth).f1 > 0.85
+    assert score(rebuilt, truth).cell_errors <= 3  # an empty 2 x 1.6 m room: 80 cells, all white
 
 
 def test_stopping_early_keeps_the_partial_map() -> None:
@@ -231,3 +232,32 @@ def test_stopping_early_keeps_the_partial_map() -> None:
     assert engine.done and engine.stats.terminated_by == "stopped"
     assert np.array_equal(rebuilt, engine.map_states())
     assert (rebuilt == FREE).sum() > 0
+
+
+# -- position fixes from the room box ----------------------------------------------------------
+def test_a_head_on_echo_off_a_box_wall_pulls_the_position_towards_the_truth() -> None:
+    from robot.boxfix import BoxFixConfig, box_fix
+
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    true_x = 1.0
+    believed = Pose(true_x + 0.06, 1.0, 0.0)  # dead reckoning is 6 cm too far east
+    ranges = np.full(8, ROBOT.sonar.max_range_m)
+    ranges[0] = 2.0 - true_x - ROBOT.sonars[0].offset_x_m  # the east wall, head on
+    dx, dy = box_fix(frame, ROBOT, believed, ranges, BoxFixConfig(gain=1.0))
+    assert dx == pytest.approx(-0.06, abs=1e-9)
+    assert dy == 0.0
+
+
+def test_box_fixes_ignore_glancing_far_or_implausible_echoes_and_unknown_rooms() -> None:
+    from robot.boxfix import BoxFixConfig, box_fix
+
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    ranges = np.full(8, ROBOT.sonar.max_range_m)
+    ranges[0] = 0.5  # implies a wall at x = 1.56: furniture, not the box's wall
+    assert box_fix(frame, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
+    ranges[0] = 2.0 - 1.0 - ROBOT.sonars[0].offset_x_m
+    assert box_fix(frame, ROBOT, Pose(1.0, 1.0, math.radians(10)), ranges, BoxFixConfig()) == (0.0, 0.0)
+    unknown = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=None)
+    assert box_fix(unknown, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
