@@ -25,7 +25,6 @@ from robot.motion import Pilot
 from robot.sensorlog import SensorLogWriter
 from robot.slam_config import SlamConfig
 from robot.truth import reachable_cells, truth_states
-from robot.world import Pose
 
 
 @dataclass
@@ -165,8 +164,8 @@ class SlamEngine:
 
     def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
         self._belief = self.mapper.states()
-        self._passable = self.mapper.passable()
         self._free_fraction = self.mapper.free_fraction()
+        self._passable = self._free_fraction >= self.explorer.min_free_fraction
         exported = classify(self._belief, self.frame.start_cell)
         changed = np.nonzero(exported != self._exported)
         if changed[0].size:
@@ -282,7 +281,3 @@ class SlamEngine:
             done=True,
             terminated_by=reason,
         )
-
-
-def start_pose_frame(grid_frame: MapFrame) -> Pose:
-    return grid_frame.start

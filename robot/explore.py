@@ -54,7 +54,6 @@ class Explorer:
     stack: list[tuple[int, int]] = field(default_factory=list)
     inspections: dict[tuple[int, int], int] = field(default_factory=dict)  # map cell -> count
     given_up: set[tuple[int, int]] = field(default_factory=set)
-    plan_goal: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         self.nav_rows = -(-self.grid.rows // self.block)
@@ -139,7 +138,6 @@ class Explorer:
             nxt = (current[0] + d[0], current[1] + d[1])
             if self._can_step(trav, current, d) and not self.visited[nxt]:
                 self.stack.append(current)
-                self.plan_goal = None
                 return Action("move", nxt, reason="explore")
         while self.stack:
             prev = self.stack.pop()

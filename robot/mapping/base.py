@@ -53,10 +53,6 @@ class Mapper(Protocol):
         """Settle all evidence before the final map is read (the end of a run)."""
         ...
 
-    def passable(self) -> NDArray[np.bool_]:
-        """Map cells the robot may drive into."""
-        ...
-
     def free_fraction(self) -> NDArray[np.float64]:
         """Per map cell, the share seen free; negative where something is believed occupied."""
         ...

@@ -332,13 +332,6 @@ class LogOddsMapper:
         grid = self.frame.grid
         return self.fine_states().reshape(grid.rows, self.k, grid.cols, self.k)
 
-    def passable(self, min_free_fraction: float = 0.25) -> NDArray[np.bool_]:
-        """Map cells the robot may drive into: nothing occupied and mostly known free."""
-        blocks = self._blocks()
-        occ = np.any(blocks == OCCUPIED, axis=(1, 3))
-        free_frac = np.mean(blocks == FREE, axis=(1, 3))
-        return ~occ & (free_frac >= min_free_fraction) & ~self._outside
-
     def free_fraction(self) -> NDArray[np.float64]:
         blocks = self._blocks()
         occ = np.any(blocks == OCCUPIED, axis=(1, 3)) | self._outside

@@ -90,9 +90,6 @@ class PaperMapper:
     def finalize(self) -> None:
         """The paper's rule is already final after every reading."""
 
-    def passable(self) -> NDArray[np.bool_]:
-        return self.states() == FREE
-
     def free_fraction(self) -> NDArray[np.float64]:
         states = self.states()
         return np.where(states == OCCUPIED, -1.0, (states == FREE).astype(float))
