@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from robot.config import RobotConfig
-from robot.mapping.base import MapFrame
+from robot.mapping.base import Evidence, MapFrame
 from robot.mapping.geometry import place_beams
 from robot.world import Pose
 
@@ -31,16 +31,61 @@ class BoxFixConfig(BaseModel):
     # box edge, and a loose gate let such echoes drag the estimate (hexagon: 27 cm of error at 12 cm).
     gate_m: float = Field(default=0.05, gt=0.0)  # the implied wall must be this close to the box edge
     gain: float = Field(default=0.3, gt=0.0, le=1.0)  # share of the offset corrected per sweep
+    # The map so far must show the box edge itself as a wall across most of the beam's footprint:
+    # in a room that is not a rectangle a corner or an angled wall may touch the box edge at one
+    # point, and echoes from near that point would drag the estimate.
+    edge_support: float = Field(default=0.7, ge=0.0, le=1.0)  # share of the footprint seen solid
+    edge_band_m: tuple[float, float] = (0.02, 0.06)  # solid evidence counts this far inside / outside the edge
+    occupied_logodds: float = Field(default=0.8, gt=0.0)  # evidence that counts as solid
+
+
+def _edge_supported(
+    evidence: Evidence,
+    hit: tuple[float, float],
+    horizontal: bool,
+    outward: float,
+    half_width: float,
+    config: BoxFixConfig,
+) -> bool:
+    """Whether the evidence shows a wall along the box edge through ``hit`` over +-``half_width``.
+
+    ``horizontal``: the beam runs along x (the edge is a vertical line); ``outward``: +1 or -1, the
+    direction out of the box along the beam.
+    """
+    g = evidence.grid
+    f = g.resolution
+    along = np.arange(-half_width, half_width + 1e-9, f)
+    across = np.arange(-config.edge_band_m[0], config.edge_band_m[1] + 1e-9, f / 2) * outward
+    a, b = np.meshgrid(along, across, indexing="ij")
+    if horizontal:
+        xs, ys = hit[0] + b, hit[1] + a
+    else:
+        xs, ys = hit[0] + a, hit[1] + b
+    rows, cols = g.world_to_index(xs, ys)
+    inside = g.contains_index(rows, cols)
+    solid = np.zeros(a.shape, dtype=bool)
+    solid[inside] = evidence.logodds[rows[inside], cols[inside]] >= config.occupied_logodds
+    return bool(np.mean(np.any(solid, axis=1)) >= config.edge_support)
 
 
 def box_fix(
-    frame: MapFrame, robot: RobotConfig, pose: Pose, ranges_m: NDArray[np.float64], config: BoxFixConfig
+    frame: MapFrame,
+    robot: RobotConfig,
+    pose: Pose,
+    ranges_m: NDArray[np.float64],
+    config: BoxFixConfig,
+    evidence: Evidence | None = None,
 ) -> tuple[float, float]:
-    """(dx, dy) [m] to add to the estimated position, from echoes off the room box's walls."""
+    """(dx, dy) [m] to add to the estimated position, from echoes off the room box's walls.
+
+    With ``evidence`` (the map so far), a reading counts only where the map already shows the box
+    edge as a wall across the beam's footprint.
+    """
     if frame.extent is None or not config.enabled:
         return 0.0, 0.0
     min_x, min_y, max_x, max_y = frame.extent
     tol = math.radians(config.axis_tolerance_deg)
+    half = math.radians(robot.sonar.beam_width_deg) / 2.0
     dxs: list[float] = []
     dys: list[float] = []
     for beam in place_beams(pose, ranges_m, robot):
@@ -56,15 +101,17 @@ def box_fix(
             if abs(math.remainder(axis - target, 2 * math.pi)) > tol:
                 continue
             if horizontal:
-                wall = beam.x + beam.range_m * math.cos(axis)
-                offset = edge - wall
-                if abs(offset) <= config.gate_m:
-                    dxs.append(offset)
+                offset = edge - (beam.x + beam.range_m * math.cos(axis))
             else:
-                wall = beam.y + beam.range_m * math.sin(axis)
-                offset = edge - wall
-                if abs(offset) <= config.gate_m:
-                    dys.append(offset)
+                offset = edge - (beam.y + beam.range_m * math.sin(axis))
+            if abs(offset) > config.gate_m:
+                continue
+            if evidence is not None:
+                hit = (edge, beam.y) if horizontal else (beam.x, edge)
+                outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
+                if not _edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
+                    continue
+            (dxs if horizontal else dys).append(offset)
     dx = config.gain * float(np.median(dxs)) if dxs else 0.0
     dy = config.gain * float(np.median(dys)) if dys else 0.0
     return dx, dy

@@ -17,14 +17,15 @@ from numpy.typing import NDArray
 from robot.boxfix import box_fix
 from robot.config import RobotConfig
 from robot.explore import Action, Explorer
+from robot.grid import OCCUPIED, UNKNOWN
 from robot.hardware import Hardware
 from robot.localization import DeadReckoning, PoseEstimate
 from robot.mapping import make_mapper
-from robot.mapping.base import MapFrame
+from robot.mapping.base import MapFrame, blocked_by_extent
 from robot.motion import Pilot
 from robot.sensorlog import SensorLogWriter
 from robot.slam_config import SlamConfig
-from robot.truth import reachable_cells, truth_states
+from robot.truth import dilate8, reachable_cells, truth_states
 
 
 @dataclass
@@ -98,6 +99,7 @@ class SlamEngine:
         self._belief = frame.grid.empty()
         self._passable = np.zeros(frame.grid.shape, dtype=bool)
         self._free_fraction = np.zeros(frame.grid.shape)
+        self._outside = blocked_by_extent(frame)
         self._started = False
         self.last_sweep: NDArray[np.float64] | None = None
         self.done = False
@@ -127,7 +129,9 @@ class SlamEngine:
         sweep, est = self.pilot.sweep()
         if self.recorder is not None:
             self.recorder.sweep(sweep)
-        dx, dy = box_fix(self.frame, self.robot, est.as_pose(), sweep.ranges_m, self.config.box_fix)
+        dx, dy = box_fix(
+            self.frame, self.robot, est.as_pose(), sweep.ranges_m, self.config.box_fix, self.mapper.evidence()
+        )
         if dx or dy:
             est = self.dead_reckoning.shift_position(dx, dy)
         self.mapper.integrate(est.as_pose(), sweep.ranges_m)
@@ -186,6 +190,13 @@ class SlamEngine:
             moved_ok=ok,
         )
 
+    def _doubtful(self) -> NDArray[np.bool_] | None:
+        """Occupied cells (not the room's surveyed wall) that touch unknown space: worth a closer look."""
+        if not self.config.inspect_walls:
+            return None
+        occupied = (self._belief == OCCUPIED) & ~self._outside
+        return occupied & dilate8(self._belief == UNKNOWN)
+
     def _finalize_map(self) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int8]]:
         """Let the mapper settle every piece of evidence once more; returns the cells that changed."""
         self.mapper.finalize()
@@ -232,7 +243,9 @@ class SlamEngine:
 
         est = self.pose
         current = self.explorer.nav_cell_of(est.x, est.y)
-        action: Action = self.explorer.decide(current, est.theta, self._belief, self._passable, self._free_fraction)
+        action: Action = self.explorer.decide(
+            current, est.theta, self._belief, self._passable, self._free_fraction, self._doubtful()
+        )
         self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
         ok = True
         target_xy = None

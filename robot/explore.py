@@ -100,11 +100,20 @@ class Explorer:
             return bool(trav[cell[0] + d[0], cell[1]] and trav[cell[0], cell[1] + d[1]])
         return True
 
-    def frontier(self, states: NDArray[np.int8], passable: NDArray[np.bool_]) -> NDArray[np.bool_]:
-        """Unresolved map cells (neither free nor occupied) in or next to the area the robot can reach."""
+    def frontier(
+        self, states: NDArray[np.int8], passable: NDArray[np.bool_], doubtful: NDArray[np.bool_] | None = None
+    ) -> NDArray[np.bool_]:
+        """Unresolved map cells (neither free nor occupied) in or next to the area the robot can reach.
+
+        ``doubtful`` marks occupied cells worth a closer look (an occupied cell between the reachable
+        area and unknown space may be a false echo closing off a passage); they count as frontier too.
+        """
         open_cells = passable | self._visited_map_cells()
         reach = reachable_cells(~open_cells, *self._start_map_cell())
-        front = (states == UNKNOWN) & dilate8(reach)
+        unresolved = states == UNKNOWN
+        if doubtful is not None:
+            unresolved = unresolved | doubtful
+        front = unresolved & dilate8(reach)
         for cell in self.given_up:
             front[cell] = False
         return front
@@ -127,6 +136,7 @@ class Explorer:
         states: NDArray[np.int8],
         passable: NDArray[np.bool_],
         free_fraction: NDArray[np.float64],
+        doubtful: NDArray[np.bool_] | None = None,
     ) -> Action:
         """The next action from navigation cell ``current`` facing ``heading_rad``."""
         self.visited[current] = True
@@ -150,13 +160,18 @@ class Explorer:
             # The stack entry is no longer adjacent (after a detour): plan a path to it instead.
             self.stack.append(prev)
             break
-        return self._plan(current, trav, states, passable)
+        return self._plan(current, trav, states, passable, doubtful)
 
     def _plan(
-        self, current: tuple[int, int], trav: NDArray[np.bool_], states: NDArray[np.int8], passable: NDArray[np.bool_]
+        self,
+        current: tuple[int, int],
+        trav: NDArray[np.bool_],
+        states: NDArray[np.int8],
+        passable: NDArray[np.bool_],
+        doubtful: NDArray[np.bool_] | None = None,
     ) -> Action:
         """Breadth-first search over traversable cells for the nearest useful goal."""
-        front = self.frontier(states, passable)
+        front = self.frontier(states, passable, doubtful)
         inspect_spots = self._inspection_spots(front)
         stack_top = self.stack[-1] if self.stack else None
         parent: dict[tuple[int, int], tuple[int, int]] = {current: current}

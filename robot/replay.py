@@ -236,7 +236,7 @@ def replay_sensor_log(
                     f"{path}: sweep at t={rec.t_s:.4f} s has {len(rec.values)} ranges; "
                     f"the header lists {n_sonars} sonars"
                 )
-            dx, dy = box_fix(frame, robot, pose, rec.ranges, slam.box_fix)  # as the engine does
+            dx, dy = box_fix(frame, robot, pose, rec.ranges, slam.box_fix, mapper.evidence())  # as the engine does
             if dx or dy:
                 pose = dr.shift_position(dx, dy).as_pose()
             mapper.integrate(pose, rec.ranges)

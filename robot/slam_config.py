@@ -29,6 +29,7 @@ class SlamConfig(BaseModel):
     max_sim_time_s: float = Field(default=6 * 3600.0, gt=0.0)  # safety cap on clock time
     max_steps: int = Field(default=20000, ge=1)  # safety cap on steps
     max_inspections: int = Field(default=2, ge=1, le=10)
+    inspect_walls: bool = True  # also inspect occupied cells between the explored area and unknown space
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()

@@ -261,3 +261,62 @@ def test_box_fixes_ignore_glancing_far_or_implausible_echoes_and_unknown_rooms()
     assert box_fix(frame, ROBOT, Pose(1.0, 1.0, math.radians(10)), ranges, BoxFixConfig()) == (0.0, 0.0)
     unknown = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=None)
     assert box_fix(unknown, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
+
+
+def _evidence_with_solid(frame: MapFrame, solid_xy: list[tuple[float, float]]):
+    from robot.mapping.base import Evidence
+
+    fine = GridSpec(frame.grid.origin_x - 0.3, frame.grid.origin_y - 0.3, 0.05, 52, 52)
+    logodds = np.zeros(fine.shape, dtype=np.float32)
+    for x, y in solid_xy:
+        r, c = fine.world_to_index(x, y)
+        logodds[int(r), int(c)] = 5.0
+    return Evidence(fine, logodds)
+
+
+def test_box_fixes_need_the_map_to_show_the_box_edge_as_a_wall() -> None:
+    """In a room that is not a rectangle, a corner can touch the box edge at one point: an echo from
+    near it must not count until the map shows a wall along the edge across the beam's footprint."""
+    from robot.boxfix import BoxFixConfig, box_fix
+
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    believed = Pose(1.04, 1.0, 0.0)
+    ranges = np.full(8, ROBOT.sonar.max_range_m)
+    ranges[0] = 2.0 - 1.0 - ROBOT.sonars[0].offset_x_m
+    config = BoxFixConfig(gain=1.0)
+    ys = np.arange(0.6, 1.4, 0.05)
+    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in ys])  # a wall just past the edge
+    corner = _evidence_with_solid(frame, [(2.02, 1.0), (1.95, 0.9), (1.95, 1.1), (1.85, 0.8), (1.85, 1.2)])
+    empty = _evidence_with_solid(frame, [])
+    assert box_fix(frame, ROBOT, believed, ranges, config, wall)[0] == pytest.approx(-0.04, abs=1e-9)
+    assert box_fix(frame, ROBOT, believed, ranges, config, corner) == (0.0, 0.0)
+    assert box_fix(frame, ROBOT, believed, ranges, config, empty) == (0.0, 0.0)
+
+
+def test_an_occupied_cell_between_the_explored_area_and_unknown_space_gets_a_closer_look() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 5, 5)
+    explorer = Explorer(grid, 1, (4, 2))
+    states = np.full(grid.shape, FREE, dtype=np.int8)
+    states[0, :] = UNKNOWN  # a strip nobody has seen ...
+    states[1, :] = OCCUPIED  # ... behind a row of occupied cells
+    states[1, 2] = OCCUPIED
+    passable = states == FREE
+    free_fraction = np.where(states == FREE, 1.0, np.where(states == OCCUPIED, -1.0, 0.0))
+    explorer.visited[2:, :] = True
+    doubtful = (states == OCCUPIED) & np.roll(states == UNKNOWN, 1, axis=0)
+    assert not explorer.frontier(states, passable).any()
+    front = explorer.frontier(states, passable, doubtful)
+    assert front[1].all() and front.sum() == grid.cols
+    action = explorer.decide((2, 2), math.pi / 2, states, passable, free_fraction, doubtful)
+    assert action.kind == "inspect" and action.heading_rad is not None
+    # Each doubtful cell is looked at up to max_inspections times, then accepted as blocked.
+    for _ in range(100):
+        if action.kind == "done":
+            break
+        here = action.target if action.kind == "move" and action.target is not None else (2, 2)
+        action = explorer.decide(here, math.pi / 2, states, passable, free_fraction, doubtful)
+    assert action.kind == "done"
+    assert {cell for cell in explorer.inspections} <= {(1, c) for c in range(grid.cols)}
+    assert all(n <= explorer.max_inspections for n in explorer.inspections.values())
+    assert {(1, c) for c in range(grid.cols)} <= explorer.given_up

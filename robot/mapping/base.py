@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,6 +29,13 @@ class MapFrame:
     def start_cell(self) -> tuple[int, int]:
         r, c = self.grid.world_to_index(self.start.x, self.start.y)
         return int(r), int(c)
+
+
+class Evidence(NamedTuple):
+    """A mapper's fine evidence grid (log-odds, > 0 occupied), for checks on what a beam may have met."""
+
+    grid: GridSpec
+    logodds: NDArray[np.float32]
 
 
 class Mapper(Protocol):
@@ -59,6 +66,10 @@ class Mapper(Protocol):
 
     def states(self) -> NDArray[np.int8]:
         """The map's own belief per cell: FREE, OCCUPIED or UNKNOWN (before reachability)."""
+        ...
+
+    def evidence(self) -> Evidence | None:
+        """The fine evidence grid behind the map, or None for a mapper that keeps none."""
         ...
 
 

@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
-from robot.mapping.base import MapFrame, blocked_by_extent
+from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
 from robot.mapping.geometry import ConeCells, cone_cells, place_beams
 from robot.world import Pose
 
@@ -308,6 +308,9 @@ class LogOddsMapper:
             self.contact_evidence[int(r), int(c)] += self.params.l_contact
             self._occ_cache = None
             self._fine_cache = None
+
+    def evidence(self) -> Evidence | None:
+        return Evidence(self.fine, self.logodds)
 
     def finalize(self) -> None:
         self._update_support(full=True)

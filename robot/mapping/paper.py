@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN
-from robot.mapping.base import MapFrame, blocked_by_extent
+from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
 from robot.mapping.geometry import cone_cells, place_beams
 from robot.world import Pose
 
@@ -98,3 +98,6 @@ class PaperMapper:
         out = self._state.copy()
         out[self._outside] = OCCUPIED
         return out
+
+    def evidence(self) -> Evidence | None:
+        return None  # the paper's rule keeps cell states only
