@@ -1,0 +1,40 @@
+"""Whole simulated runs on every built-in world, default noise: the map and the pose must stay good.
+
+These are regression bars, set below what the worlds measure over several seeds (README), on one
+seed each: a change that breaks mapping, exploration or localisation in any kind of room fails here.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from robot.runner import simulate
+from robot.settings import load_run_config
+from robot.world import load_world
+
+# world: (minimum F1, minimum recall); the large hall is the hardest (few walls in sonar range).
+BARS = {
+    "room1": (0.93, 0.99),
+    "room2": (0.88, 0.90),
+    "room3": (0.93, 0.95),
+    "room4": (0.93, 0.97),
+    "lshape": (0.95, 0.95),
+    "corridor": (0.97, 0.97),
+    "clutter": (0.88, 0.85),
+    "hexagon": (0.93, 0.90),
+    "tworooms": (0.90, 0.95),
+    "hall": (0.75, 0.90),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BARS))
+def test_a_default_run_maps_the_world_well(name: str) -> None:
+    cfg = load_run_config()
+    result = simulate(load_world(name), cfg.robot, cfg.noise, cfg.slam, seed=0)
+    min_f1, min_recall = BARS[name]
+    m = result.metrics
+    assert result.terminated_by == "complete"
+    assert m.f1 >= min_f1, f"{name}: F1 {m.f1:.3f}"
+    assert m.recall >= min_recall, f"{name}: recall {m.recall:.3f}"
+    assert result.final_xy_error_m <= 0.10, f"{name}: final position error {result.final_xy_error_m:.3f} m"
+    assert result.final_theta_error_deg <= 3.0, f"{name}: final heading error {result.final_theta_error_deg:.2f} deg"
