@@ -6,14 +6,17 @@ import argparse
 import fcntl
 import logging
 import re
+import signal
 import socket
 import sys
 import uuid
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
+from types import FrameType
 from typing import IO
 
+import uvicorn
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import FileResponse, HTMLResponse, Response
@@ -135,6 +138,27 @@ class _HttpOnly:
         await self.app(scope, receive, send)
 
 
+class Server(uvicorn.Server):
+    """uvicorn's server, except that SIGINT or SIGTERM also halts the robot's motors at once.
+
+    uvicorn's graceful shutdown first waits up to ``timeout_graceful_shutdown`` for open connections
+    (live viewers) and only then runs the lifespan that stops the runs; a robot must not drive on
+    meanwhile. Only the main thread receives signals, so this runs on the event loop's thread.
+    """
+
+    def __init__(self, config: uvicorn.Config, app: FastAPI) -> None:
+        super().__init__(config)
+        self.service_app = app
+
+    def handle_exit(self, sig: int, frame: FrameType | None) -> None:
+        try:
+            manager: RunManager | None = getattr(self.service_app.state, "manager", None)
+            if manager is not None:
+                manager.halt_hardware(f"stopped by {signal.Signals(sig).name}")
+        finally:
+            super().handle_exit(sig, frame)  # shut down whatever happened above
+
+
 def _listen(host: str, port: int) -> socket.socket:
     family = socket.AF_INET6 if ":" in host else socket.AF_INET
     sock = socket.socket(family, socket.SOCK_STREAM)
@@ -160,8 +184,6 @@ def urls(settings: ServerSettings, port: int) -> list[str]:
 
 def serve(args: argparse.Namespace) -> int:
     """``sonarslam serve``: check the settings, bind, print where to look, and run until interrupted."""
-    import uvicorn
-
     settings = load_settings(
         host=getattr(args, "host", None),
         port=getattr(args, "port", None),
@@ -191,7 +213,7 @@ def serve(args: argparse.Namespace) -> int:
         timeout_graceful_shutdown=5,
         lifespan="on",
     )
-    server = uvicorn.Server(config)
+    server = Server(config, app)
     for name in ("uvicorn.access", "uvicorn.error"):
         logging.getLogger(name).addFilter(RedactTokens())
     try:

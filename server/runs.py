@@ -17,6 +17,7 @@ from robot.metrics import score
 from robot.settings import load_run_config
 from server.downloads import MEDIA_TYPES
 from server.errors import ApiError, conflict, not_found
+from server.hardware import halt
 from server.live import LiveRun, robot_view
 from server.models import ConfigUpdate, GridInfo, Progress, RunCreate, RunDefaults, RunView
 from server.plan import RunPlan, merge_options, validate_options
@@ -62,6 +63,7 @@ class RunManager:
         self._running: set[str] = set()
         self._ended: dict[str, asyncio.Event] = {}
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._robot_lock = asyncio.Lock()  # real hardware: one run at a time
 
     # -- lifecycle -------------------------------------------------------------------------------
     async def start(self) -> None:
@@ -94,6 +96,17 @@ class RunManager:
             await asyncio.to_thread(session.thread.join, STOP_WAIT_S)
         for live in self.lives.values():
             live.broadcaster.close_all()
+
+    def halt_hardware(self, reason: str) -> None:
+        """Stop real motors now and end their runs: for a signal handler on the loop's thread, because
+        the graceful shutdown first waits for open connections before it stops the runs."""
+        for session in list(self.sessions.values()):
+            if session.plan.hardware == "sim":
+                continue  # nothing moves; the shutdown interrupts it as usual
+            session.request_stop("shutdown")  # a run between steps ends as interrupted, one mid-step as error
+            hw = session.hw
+            if hw is not None and halt(hw, reason):
+                log.warning("run %s: %s: motors stopped", session.id, reason)
 
     # -- defaults --------------------------------------------------------------------------------
     def builtin_defaults(self) -> RunDefaults:
@@ -150,6 +163,18 @@ class RunManager:
         return record
 
     async def create(self, body: RunCreate) -> RunRecord:
+        if self.settings.hardware == "sim":
+            return await self._create(body)
+        # One robot: a second run is refused rather than queued, since a queued run would set off on
+        # its own when the first one ends. Checked and claimed under the lock, so two requests cannot
+        # both get it while the first is still being validated.
+        async with self._robot_lock:
+            holder = next(iter(self.sessions), None)
+            if holder is not None:
+                raise conflict(f"the robot is busy with run {holder}; stop it before starting another")
+            return await self._create(body)
+
+    async def _create(self, body: RunCreate) -> RunRecord:
         if len(self._queue) >= self.settings.max_queued_runs and len(self._running) >= self.settings.concurrent_runs:
             raise ApiError(429, f"{len(self._queue)} runs are already waiting; try again when one has ended")
         options = merge_options(self.defaults(), body)

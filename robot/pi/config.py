@@ -113,9 +113,13 @@ class MotorPins(_Frozen):
 
 
 class MotorsConfig(_Frozen):
+    """Both H-bridge channels. Open loop: a wheel speed becomes a duty through ``max_wheel_speed_m_s``."""
+
     left: MotorPins
     right: MotorPins
     pwm_frequency_hz: float = Field(default=1000.0, gt=0.0, le=20000.0)
+    # Dead-band compensation: the duty a non-zero command starts from (0 keeps duty = speed / max speed).
+    min_duty: float = Field(default=0.0, ge=0.0, lt=1.0, allow_inf_nan=False)
 
 
 class EncoderPins(_Frozen):

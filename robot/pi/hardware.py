@@ -22,6 +22,7 @@ from robot.pi.mpu6050 import GyroCalibration, ImuSampler, Mpu6050
 from robot.pi.sonar import SonarBank, SonarRing
 
 SLEEP_SLICE_S = 0.1  # long sleeps are cut into slices so the watchdog keeps being fed
+MOCK_PINS = "GPIOZERO_PIN_FACTORY=mock GPIOZERO_MOCK_PIN_CLASS=mockpwmpin"  # the motors need PWM-capable pins
 
 
 class PiHardware:
@@ -52,6 +53,7 @@ class PiHardware:
         self.imu = imu
         self.gyro_calibration = gyro_calibration
         self._resources = list(resources or [])  # extra closers (I2C buses), run last
+        self._on_close: list[Callable[[], None]] = []  # run right after the motors close (see add_closer)
         self._clock = clock
         self._sleep = sleep
         self._listeners: list[Callable[[], None]] = []
@@ -79,7 +81,7 @@ class PiHardware:
         ``bus_factory(n)`` opens I2C bus n and defaults to smbus2. Any failure closes what was
         opened and raises ``HardwareError`` with a one-line reason.
         """
-        from gpiozero.exc import BadPinFactory, GPIOZeroError
+        from gpiozero.exc import BadPinFactory, GPIOZeroError, PinPWMUnsupported
 
         pi, robot = setup.pi, setup.robot
         open_bus = bus_factory or open_smbus
@@ -103,6 +105,7 @@ class PiHardware:
                     pi.motors.right,
                     max_wheel_speed_m_s=robot.max_wheel_speed_m_s,
                     pwm_frequency_hz=pi.motors.pwm_frequency_hz,
+                    min_duty=pi.motors.min_duty,
                     pin_factory=pin_factory,
                 )
                 stack.callback(motors.close)
@@ -127,10 +130,15 @@ class PiHardware:
             except BadPinFactory as exc:
                 raise HardwareError(
                     f"no GPIO pin factory ({exc}): on a Raspberry Pi install lgpio (pip install 'sonarslam[pi]'); "
-                    "elsewhere set GPIOZERO_PIN_FACTORY=mock for a dry run"
+                    f"elsewhere set {MOCK_PINS} for a dry run"
+                ) from None
+            except PinPWMUnsupported:
+                raise HardwareError(
+                    f"{setup.path}: {part}: the pin factory cannot drive PWM on these pins; "
+                    f"gpiozero's mock pins need {MOCK_PINS}"
                 ) from None
             except (GPIOZeroError, OSError) as exc:
-                raise HardwareError(f"{setup.path}: {part}: {exc}") from None
+                raise HardwareError(f"{setup.path}: {part}: {exc or type(exc).__name__}") from None
             sonar = robot.sonar
             hw = cls(
                 robot,
@@ -200,7 +208,7 @@ class PiHardware:
             if self._closed:
                 return
             self._closed = True
-        closers: list[Callable[[], None]] = [self.motors.close]
+        closers: list[Callable[[], None]] = [self.motors.close, *reversed(self._on_close)]
         if self.imu is not None:
             closers.append(self.imu.close)
         closers += [self.sonars.close, *(e.close for e in self.encoders), *self._resources]
@@ -220,6 +228,16 @@ class PiHardware:
         self.close()
 
     # -- safety hooks ------------------------------------------------------------------------
+
+    def add_closer(self, closer: Callable[[], None]) -> None:
+        """``closer()`` runs once when the hardware closes, after the motors have stopped and before the
+        sensors are released (the last one added runs first). For what must live exactly as long as
+        the hardware, such as a safety guard around a control loop on a worker thread."""
+        with self._close_lock:
+            if not self._closed:
+                self._on_close.append(closer)
+                return
+        closer()  # already closed: release it now
 
     def add_activity_listener(self, listener: Callable[[], None]) -> None:
         """``listener()`` runs on every hardware call (and every ping, every sleep slice)."""

@@ -11,9 +11,17 @@ from gpiozero import Motor, Robot
 from robot.pi.config import MotorPins
 
 
-def speed_to_duty(speed_m_s: float, max_speed_m_s: float) -> float:
-    """Open-loop map from rim speed [m/s] to signed PWM duty in [-1, 1]."""
-    return min(1.0, max(-1.0, speed_m_s / max_speed_m_s))
+def speed_to_duty(speed_m_s: float, max_speed_m_s: float, min_duty: float = 0.0) -> float:
+    """Open-loop map from rim speed [m/s] to signed PWM duty in [-1, 1].
+
+    A motor stands still below some duty (friction, the H-bridge's voltage drop) and its speed grows
+    roughly linearly above it, so speeds in (0, max] map linearly onto duties in (min_duty, 1];
+    0 stays 0. With ``min_duty`` 0 this is plain ``speed / max_speed``.
+    """
+    fraction = min(1.0, abs(speed_m_s) / max_speed_m_s)
+    if fraction == 0.0:
+        return 0.0
+    return math.copysign(min_duty + (1.0 - min_duty) * fraction, speed_m_s)
 
 
 class DriveMotors:
@@ -26,9 +34,13 @@ class DriveMotors:
         *,
         max_wheel_speed_m_s: float,
         pwm_frequency_hz: float = 1000.0,
+        min_duty: float = 0.0,
         pin_factory: Any = None,
     ) -> None:
+        if not 0.0 <= min_duty < 1.0:
+            raise ValueError(f"min_duty must be in [0, 1), got {min_duty}")
         self.max_wheel_speed_m_s = max_wheel_speed_m_s
+        self.min_duty = min_duty  # dead-band compensation, see speed_to_duty
         self._lock = threading.RLock()  # re-entrant: a signal handler may stop the motors mid-command
         motors: list[Any] = []
         try:
@@ -52,8 +64,8 @@ class DriveMotors:
             self.stop()
             raise ValueError(f"wheel speeds must be finite, got ({left_m_s}, {right_m_s})")
         duties = (
-            speed_to_duty(left_m_s, self.max_wheel_speed_m_s),
-            speed_to_duty(right_m_s, self.max_wheel_speed_m_s),
+            speed_to_duty(left_m_s, self.max_wheel_speed_m_s, self.min_duty),
+            speed_to_duty(right_m_s, self.max_wheel_speed_m_s, self.min_duty),
         )
         with self._lock:
             if not self._closed:

@@ -11,61 +11,9 @@ from pathlib import Path
 import pytest
 from gpiozero import Device
 from gpiozero.pins.mock import MockFactory, MockPin, MockPWMPin, MockTriggerPin
+from pi_configs import ECHO_PINS, ENCODER_PINS, MOTOR_PINS, PI_TOML, ROBOT_TOML, SPEED_OF_SOUND_M_S, TRIGGER_PINS
 
 from robot.pi.config import load_pi_setup
-
-SPEED_OF_SOUND_M_S = 343.0
-TRIGGER_PINS = (4, 27, 23, 25, 21, 8, 10, 14)
-ECHO_PINS = (17, 22, 24, 26, 7, 9, 11, 15)
-MOTOR_PINS = {"left": (12, 13), "right": (18, 19)}  # (forward, backward)
-ENCODER_PINS = {"left": (5, 6), "right": (16, 20)}  # (A, B)
-
-ROBOT_TOML = """
-[robot]
-name = "test-bot"
-max_wheel_speed_m_s = 0.25
-encoder_counts_per_rev = 48
-[sonar]
-max_range_m = 4.0
-ping_interval_s = 0.0
-firing_order = [0, 4, 2, 6, 1, 5, 3, 7]
-[imu]
-rate_hz = 200.0
-"""
-
-SENSORS_TOML = ",\n".join(
-    f"  {{ trigger_pin = {t}, echo_pin = {e} }}" for t, e in zip(TRIGGER_PINS, ECHO_PINS, strict=True)
-)
-
-PI_TOML = f"""
-robot_file = "robot.toml"
-[sonar_ring]
-kind = "hcsr04"
-speed_of_sound_m_s = {SPEED_OF_SOUND_M_S}
-sensors = [
-{SENSORS_TOML}
-]
-[motors.left]
-forward_pin = 12
-backward_pin = 13
-[motors.right]
-forward_pin = 18
-backward_pin = 19
-[encoders]
-pulses_per_rev = 12
-decoding = "x4"
-[encoders.left]
-a_pin = 5
-b_pin = 6
-[encoders.right]
-a_pin = 16
-b_pin = 20
-reversed = true
-[imu]
-calibration_samples = 20
-[safety]
-watchdog_timeout_s = 0.5
-"""
 
 
 def echo_time_s(range_m: float) -> float:
@@ -268,6 +216,12 @@ class FakeI2CBus:
 @pytest.fixture
 def i2c_bus():
     return FakeI2CBus(1)
+
+
+@pytest.fixture
+def i2c_bus_class():
+    """For tests that open a fresh fake bus per robot."""
+    return FakeI2CBus
 
 
 @pytest.fixture

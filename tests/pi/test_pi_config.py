@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 import pytest
+from pi_configs import SRF02_ADDRESSES, robot_pi_toml, srf02_ring
 
 from robot.config import load_robot_config
 from robot.errors import ConfigError
@@ -53,23 +54,12 @@ def test_i2c_pins_are_free_without_i2c_devices(write_config, pi_toml):
     assert load_pi_setup(write_config(toml)).pi.imu.enabled is False
 
 
-SRF02_RING = """
-[sonar_ring]
-kind = "srf02"
-bus = 1
-sensors = [{ address = 0x70 }, { address = 0x71 }, { address = 0x72 }, { address = 0x73 },
-           { address = 0x74 }, { address = 0x75 }, { address = 0x76 }, { address = ADDR }]
-"""
+def _with_srf02(last_address: str) -> str:
+    return robot_pi_toml(sonar_ring=srf02_ring([*SRF02_ADDRESSES[:-1], last_address]))
 
 
-def _with_srf02(pi_toml: str, last_address: str) -> str:
-    start = pi_toml.index("[sonar_ring]")
-    end = pi_toml.index("[motors.left]")
-    return pi_toml[:start] + SRF02_RING.replace("ADDR", last_address) + pi_toml[end:]
-
-
-def test_srf02_ring_loads(write_config, pi_toml):
-    setup = load_pi_setup(write_config(_with_srf02(pi_toml, "0x7F")))
+def test_srf02_ring_loads(write_config):
+    setup = load_pi_setup(write_config(_with_srf02("0x7F")))
     assert [s.address for s in setup.pi.sonar_ring.sensors][-1] == 0x7F
 
 
@@ -81,9 +71,9 @@ def test_srf02_ring_loads(write_config, pi_toml):
         ("0x70", "I2C address 0x70 is used by sensors[0] and sensors[7]"),
     ],
 )
-def test_srf02_addresses_are_checked(write_config, pi_toml, address, expected):
+def test_srf02_addresses_are_checked(write_config, address, expected):
     with pytest.raises(ConfigError, match=expected.replace("[", r"\[").replace("]", r"\]")):
-        load_pi_setup(write_config(_with_srf02(pi_toml, address)))
+        load_pi_setup(write_config(_with_srf02(address)))
 
 
 def test_imu_address_is_checked(write_config, pi_toml):

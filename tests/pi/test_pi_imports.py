@@ -9,11 +9,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_core_and_pi_config_do_not_import_gpiozero_or_smbus2():
+def test_core_pi_config_and_service_do_not_import_gpiozero_or_smbus2():
     code = (
         "import sys\n"
         "import robot, robot.hardware, robot.config\n"
         "import robot.pi, robot.pi.config, robot.pi.safety, robot.pi.check\n"
+        "import server.main, server.hardware, server.runs\n"  # the service, until a Pi run opens the robot
         "loaded = sorted(m for m in ('gpiozero', 'smbus2', 'lgpio') if m in sys.modules)\n"
         "print(','.join(loaded))\n"
     )

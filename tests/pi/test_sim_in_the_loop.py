@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from pi_configs import UPRIGHT, UPSIDE_DOWN, sim_pi_toml
 from sim_bridge import SimBridge
 
-from robot.config import DEFAULT_ROBOT_FILE
 from robot.engine import SlamEngine
 from robot.hardware import EncoderCounts
 from robot.metrics import score
@@ -32,38 +32,6 @@ from robot.world import load_world
 SEED = 0
 WORLD = "room2"
 F1_MARGIN = 0.1
-
-SIM_PI_TOML = f"""
-robot_file = "{DEFAULT_ROBOT_FILE.as_posix()}"
-[sonar_ring]
-kind = "srf02"
-bus = 1
-sensors = [{{ address = 0x70 }}, {{ address = 0x71 }}, {{ address = 0x72 }}, {{ address = 0x73 }},
-           {{ address = 0x74 }}, {{ address = 0x75 }}, {{ address = 0x76 }}, {{ address = 0x77 }}]
-[motors.left]
-forward_pin = 12
-backward_pin = 13
-[motors.right]
-forward_pin = 18
-backward_pin = 19
-[encoders]
-pulses_per_rev = 12
-decoding = "x4"
-[encoders.left]
-a_pin = 5
-b_pin = 6
-[encoders.right]
-a_pin = 16
-b_pin = 20
-reversed = true
-[imu]
-bus = 1
-calibration_samples = 100
-{{imu_axes}}
-"""
-
-UPRIGHT = 'forward_axis = "+x"\nleft_axis = "+y"\nup_axis = "+z"'
-UPSIDE_DOWN = 'forward_axis = "+x"\nleft_axis = "-y"\nup_axis = "-z"'  # component side down
 
 
 def _angle_error(a: float, b: float) -> float:
@@ -91,7 +59,7 @@ def run_on_pi(
     cfg = load_run_config()
     world = load_world(WORLD)
     path = tmp_path / "robot-pi.toml"
-    path.write_text(SIM_PI_TOML.replace("{imu_axes}", imu_axes))
+    path.write_text(sim_pi_toml(imu_axes))
     setup = load_pi_setup(path)
     assert setup.robot == cfg.robot
     wall0 = time.perf_counter()

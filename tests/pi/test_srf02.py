@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from pi_configs import robot_pi_toml, srf02_ring
 
 from robot.errors import HardwareError
 from robot.pi.srf02 import Srf02Bank
@@ -48,16 +49,12 @@ def test_missing_sonar_names_bus_and_address(i2c_bus, srf02_class):
 
 
 def test_hardware_fires_srf02s_in_the_staggered_order(
-    mock_factory, i2c_bus, srf02_class, fake_mpu, bus_factory, write_config, pi_toml
+    mock_factory, i2c_bus, srf02_class, fake_mpu, bus_factory, write_config
 ):
     from robot.pi.config import load_pi_setup
     from robot.pi.hardware import PiHardware
 
-    start, end = pi_toml.index("[sonar_ring]"), pi_toml.index("[motors.left]")
-    ring = '[sonar_ring]\nkind = "srf02"\nbus = 1\nsensors = [' + ", ".join(
-        f"{{ address = {0x70 + i:#04x} }}" for i in range(8)
-    ) + "]\n"
-    setup = load_pi_setup(write_config(pi_toml[:start] + ring + pi_toml[end:]))
+    setup = load_pi_setup(write_config(robot_pi_toml(sonar_ring=srf02_ring())))
     sonars = [i2c_bus.attach(0x70 + i, srf02_class(range_cm=100 + 10 * i)) for i in range(8)]
     with PiHardware.from_config(setup, bus_factory=bus_factory, sleep=lambda s: None) as hw:
         i2c_bus.log.clear()

@@ -13,7 +13,7 @@ import uvicorn
 from fastapi import FastAPI
 from pydantic_settings import BaseSettings, PydanticBaseSettingsSource
 
-from server.main import create_app
+from server.main import Server, create_app
 from server.runs import RunManager
 from server.settings import ServerSettings
 
@@ -37,7 +37,7 @@ class LiveServer:
         config = uvicorn.Config(
             self.app, log_level="warning", lifespan="on", ws_per_message_deflate=False, timeout_graceful_shutdown=5
         )
-        self.server = uvicorn.Server(config)
+        self.server = Server(config, self.app)
         self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]}, daemon=True)
 
     @property

@@ -23,7 +23,8 @@ ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorBody} for code i
 async def create_run(manager: ManagerDep, body: RunCreate, response: Response) -> RunView:
     """Start a run; fields left out come from the default run configuration (``GET /api/config``).
 
-    When every slot is busy the run waits as ``queued``."""
+    When every slot is busy a simulated run waits as ``queued``. The robot runs one at a time: while
+    it is busy, another start is refused with 409."""
     record = await manager.create(body)
     response.headers["Location"] = f"/api/runs/{record.id}"
     return manager.view(record)
