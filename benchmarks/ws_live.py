@@ -4,9 +4,10 @@ Starts ``sonarslam serve`` as its own process on an ephemeral 127.0.0.1 port (so
 not share an interpreter) and prints three measurements:
 
 1. bytes: everything one viewer receives during a whole run, against the same messages carrying
-   the full grid at every step instead of the changed cells (target: <= 5 %);
-2. latency: step end on the server (``wall_time`` in each step) to arrival at a viewer, p50 / p99,
-   with 1 and 50 viewers (target: p99 < 50 ms on loopback);
+   the full grid at every step instead of the changed cells (target: <= 5 %); once as plain text and
+   once with permessage-deflate (what browsers negotiate when the service has ``ws_compression`` on);
+2. latency: step end on the server (``wall_time``, which steps carry for viewers that ask with
+   ``?timing=1``) to arrival at a viewer, p50 / p99, with 1 and 50 viewers (target: p99 < 50 ms on loopback);
 3. slowdown: wall time of a max-speed run with 50 viewers against none (target: < 10 %).
 
     python benchmarks/ws_live.py [--only bytes|latency|slowdown] [--world room1] [--viewers 50]
@@ -28,6 +29,7 @@ import sys
 import tempfile
 import threading
 import time
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -36,6 +38,9 @@ from typing import Any
 import httpx
 import numpy as np
 from websockets.asyncio.client import connect
+from websockets.extensions.base import Extension
+from websockets.extensions.permessage_deflate import ClientPerMessageDeflateFactory, PerMessageDeflate
+from websockets.frames import CTRL_OPCODES, Frame
 
 URL_LINE = re.compile(r"(http://127\.0\.0\.1:\d+)/")
 
@@ -113,60 +118,137 @@ def percentile(values: list[float], q: float) -> float:
 
 
 # -- 1. bytes --------------------------------------------------------------------------------------
-async def count_bytes(ws_url: str) -> dict[str, int]:
-    """Receive a whole run; size every message, and the same step messages carrying the full grid."""
-    totals = {"messages": 0, "ours": 0, "steps": 0, "merged": 0, "step_cells": 0, "full_b64": 0, "full_json": 0}
-    totals["grid"] = 0
+class CountingDeflate(Extension):
+    """permessage-deflate as negotiated, counting the payload bytes of data frames as they arrive."""
+
+    def __init__(self, inner: PerMessageDeflate) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.received = 0
+
+    def decode(self, frame: Frame, *, max_size: int | None = None) -> Frame:
+        if frame.opcode not in CTRL_OPCODES:
+            self.received += len(frame.data)
+        return self.inner.decode(frame, max_size=max_size)
+
+    def encode(self, frame: Frame) -> Frame:
+        return self.inner.encode(frame)
+
+
+class CountingDeflateFactory(ClientPerMessageDeflateFactory):
+    """What ``compression="deflate"`` asks for (websockets' defaults), with the bytes counted."""
+
+    extension: CountingDeflate | None = None
+
+    def __init__(self) -> None:
+        super().__init__(compress_settings={"memLevel": 5})
+
+    def process_response_params(self, params: Any, accepted_extensions: Any) -> CountingDeflate:
+        inner = super().process_response_params(params, accepted_extensions)
+        assert isinstance(inner, PerMessageDeflate)
+        self.extension = CountingDeflate(inner)
+        return self.extension
+
+
+class Deflater:
+    """The server's side of permessage-deflate (context takeover), run here over messages it never sent."""
+
+    def __init__(self, window_bits: int) -> None:
+        self.z = zlib.compressobj(wbits=-window_bits, memLevel=5)
+
+    def size(self, text: str) -> int:
+        return len(self.z.compress(text.encode()) + self.z.flush(zlib.Z_SYNC_FLUSH)) - 4
+
+
+def encode(message: dict[str, Any]) -> str:
+    return json.dumps(message, separators=(",", ":"))
+
+
+async def count_bytes(ws_url: str, deflate: bool) -> dict[str, int]:
+    """Receive a whole run; size every message, and the same messages carrying the full grid at every step.
+
+    The baseline is built message by message: each step as received, but with its cell changes (if
+    any) replaced by the whole grid, once for every engine step it stands for; everything else as is."""
+    totals = dict.fromkeys(("messages", "ours", "wire", "steps", "merged", "step_cells", "grid"), 0)
+    totals |= dict.fromkeys(("full_b64", "full_json", "ours_deflated", "full_b64_deflated"), 0)
     grid: np.ndarray | None = None
-    async with connect(ws_url, max_size=None, compression=None) as ws:
+    factory = CountingDeflateFactory() if deflate else None
+    extensions = [factory] if factory is not None else None
+    ours_z: Deflater | None = None
+    full_z: Deflater | None = None
+    async with connect(ws_url, max_size=None, compression=None, extensions=extensions) as ws:
+        if factory is not None:
+            assert factory.extension is not None, "the service did not negotiate permessage-deflate"
+            window = factory.extension.inner.remote_max_window_bits
+            ours_z, full_z = Deflater(window), Deflater(window)
         async for raw in ws:
-            size = len(raw.encode() if isinstance(raw, str) else raw)
+            text = raw.decode() if isinstance(raw, bytes) else raw
+            size = len(text.encode())
             totals["messages"] += 1
             totals["ours"] += size
-            msg = json.loads(raw)
+            msg = json.loads(text)
+            baseline = [text]
+            ros = text
             if msg["type"] == "snapshot":
                 g = msg["grid"]
                 cells = np.frombuffer(base64.b64decode(msg["cells"]), dtype=np.uint8)
                 grid = cells.reshape(g["rows"], g["cols"]).copy()
                 totals["grid"] = grid.size
             elif msg["type"] == "step" and grid is not None:
-                for r, c, code in msg["cells"]:
+                changes = msg.get("cells", [])
+                for r, c, code in changes:
                     grid[r, c] = code
                 n = msg.get("merged", 1)  # the baseline resends the grid for every engine step
                 totals["steps"] += n
                 totals["merged"] += n - 1
-                cells_size = len(json.dumps(msg["cells"], separators=(",", ":")))
-                totals["step_cells"] += cells_size
-                full_b64 = base64.b64encode(grid.tobytes()).decode()
-                totals["full_b64"] += n * (size - cells_size + len(full_b64) + 2)
-                ros = np.where(grid == 2, -1, np.where(grid == 1, 100, 0)).ravel().tolist()  # rosbridge's int8 list
-                totals["full_json"] += n * (size + len(json.dumps(ros, separators=(",", ":"))))
-            else:
-                totals["full_b64"] += size
-                totals["full_json"] += size
+                totals["step_cells"] += len(encode(changes)) if changes else 0
+                baseline = [encode(msg | {"cells": base64.b64encode(grid.tobytes()).decode()})] * n
+                ros_cells = np.where(grid == 2, -1, np.where(grid == 1, 100, 0)).ravel().tolist()  # rosbridge int8
+                ros = encode(msg | {"cells": ros_cells})
+                totals["full_json"] += (n - 1) * len(ros)
+            totals["full_b64"] += sum(len(t) for t in baseline)
+            totals["full_json"] += len(ros)
+            if ours_z is not None and full_z is not None:
+                totals["ours_deflated"] += ours_z.size(text)
+                totals["full_b64_deflated"] += sum(full_z.size(t) for t in baseline)
+    totals["wire"] = factory.extension.received if factory is not None and factory.extension else totals["ours"]
     return totals
 
 
 def bench_bytes(url: str, world: str, resolutions: list[float]) -> None:
     print(f"\n1. bytes over the WebSocket for a whole {world} run, one viewer, vs the full grid at every step")
     for resolution in resolutions:
-        run_id = queued_run(url, world, resolution=resolution)
-        t = asyncio.run(count_bytes(f"{url.replace('http', 'ws')}/ws/runs/{run_id}"))
-        run = wait_ended(url, run_id)
-        full_grid_b64 = t["steps"] * ((t["grid"] + 2) // 3 * 4)
-        print(
-            f"   resolution {resolution} m ({t['grid']} cells), {t['steps']} steps ({run['terminated_by']}): "
-            f"sent {t['ours'] / 1e3:.1f} kB in {t['messages']} messages ({t['merged']} steps merged away)"
-        )
-        print(
-            f"     whole messages: {t['ours'] / 1e3:.1f} kB vs {t['full_b64'] / 1e3:.1f} kB with the grid (base64) "
-            f"in every step = {100 * t['ours'] / t['full_b64']:.1f} %; vs {t['full_json'] / 1e3:.1f} kB "
-            f"as a rosbridge-style int array = {100 * t['ours'] / t['full_json']:.1f} %"
-        )
-        print(
-            f"     map data only: {t['step_cells'] / 1e3:.1f} kB of cell changes vs {full_grid_b64 / 1e3:.1f} kB of "
-            f"full grids = {100 * t['step_cells'] / max(full_grid_b64, 1):.2f} %"
-        )
+        for deflate in (False, True):
+            run_id = queued_run(url, world, resolution=resolution)
+            t = asyncio.run(count_bytes(f"{url.replace('http', 'ws')}/ws/runs/{run_id}", deflate))
+            run = wait_ended(url, run_id)
+            if not deflate:
+                full_grid_b64 = t["steps"] * ((t["grid"] + 2) // 3 * 4)
+                print(
+                    f"   resolution {resolution} m ({t['grid']} cells), {t['steps']} steps ({run['terminated_by']}): "
+                    f"{t['messages']} messages ({t['merged']} steps merged away)"
+                )
+                print(
+                    f"     plain text: {t['ours'] / 1e3:.1f} kB vs {t['full_b64'] / 1e3:.1f} kB with the grid (base64) "
+                    f"in every step = {100 * t['ours'] / t['full_b64']:.1f} %; vs {t['full_json'] / 1e3:.1f} kB "
+                    f"as a rosbridge-style int array = {100 * t['ours'] / t['full_json']:.1f} %"
+                )
+                cells_kb, grids_kb = t["step_cells"] / 1e3, full_grid_b64 / 1e3
+                print(
+                    f"     map data only: {cells_kb:.1f} kB of cell changes vs {grids_kb:.1f} kB "
+                    f"of full grids = {100 * t['step_cells'] / max(full_grid_b64, 1):.2f} %"
+                )
+            else:
+                print(
+                    f"     permessage-deflate: {t['wire'] / 1e3:.1f} kB on the wire ({t['ours'] / 1e3:.1f} kB of text, "
+                    f"{t['messages']} messages; the server's compressor run here over the same text gives "
+                    f"{t['ours_deflated'] / 1e3:.1f} kB)"
+                )
+                print(
+                    f"       vs the plain-text full-grid baseline {t['full_b64'] / 1e3:.1f} kB = "
+                    f"{100 * t['wire'] / t['full_b64']:.1f} %; vs that baseline deflated the same way "
+                    f"{t['full_b64_deflated'] / 1e3:.1f} kB = {100 * t['wire'] / t['full_b64_deflated']:.1f} %"
+                )
 
 
 # -- 2. latency ------------------------------------------------------------------------------------
@@ -194,7 +276,7 @@ def bench_latency(url: str, world: str, viewers: list[int], max_steps: int) -> N
     print(f"\n2. pose latency, step end on the server -> arrival at a viewer ({world}, max speed, {max_steps} steps)")
     for n in viewers:
         run_id = queued_run(url, world, max_steps=max_steps)
-        latencies, counts = asyncio.run(watch_many(f"{url.replace('http', 'ws')}/ws/runs/{run_id}", n))
+        latencies, counts = asyncio.run(watch_many(f"{url.replace('http', 'ws')}/ws/runs/{run_id}?timing=1", n))
         run = wait_ended(url, run_id)
         ms = [1e3 * v for v in latencies]
         print(
@@ -278,8 +360,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.2f}")
     if args.only in (None, "bytes"):
-        # Every step to the viewer (no rate cap), so that nothing is saved by merging.
-        with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), ws_max_rate_hz="10000") as url:
+        # Every step to the viewer (no rate cap), so that nothing is saved by merging; deflate offered.
+        settings = {"ws_max_rate_hz": "10000", "ws_compression": "true"}
+        with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), **settings) as url:
             bench_bytes(url, args.world, [0.2, 0.1])
     with tempfile.TemporaryDirectory() as tmp, service(Path(tmp)) as url:
         if args.only in (None, "latency"):

@@ -19,15 +19,20 @@ def encode(message: dict[str, Any]) -> str:
 
 @dataclass
 class Outgoing:
-    """One wire message: the dict (for merging) and its JSON text, encoded once for every viewer."""
+    """One wire message: the dict (for merging) and its JSON text, encoded once for every viewer.
+
+    A step also knows when it ended on the server (``wall_time``, Unix time [s]); only viewers that
+    asked for timing get it, appended to the shared text."""
 
     data: dict[str, Any]
     text: str = ""
     merged: bool = False  # data changed since text was made
+    wall_time: float | None = None
+    _timed: str | None = None
 
     @classmethod
-    def of(cls, data: dict[str, Any], text: str | None = None) -> Outgoing:
-        return cls(data, text if text is not None else encode(data))
+    def of(cls, data: dict[str, Any], text: str | None = None, wall_time: float | None = None) -> Outgoing:
+        return cls(data, text if text is not None else encode(data), wall_time=wall_time)
 
     @property
     def kind(self) -> str:
@@ -37,28 +42,44 @@ class Outgoing:
     def terminal(self) -> bool:
         return self.kind == "status" and self.data.get("event") in TERMINAL_EVENTS
 
-    def wire(self) -> str:
+    def wire(self, timing: bool = False) -> str:
         if self.merged:
             self.text = encode(self.data)
             self.merged = False
-        return self.text
+            self._timed = None
+        if not timing or self.wall_time is None:
+            return self.text
+        if self._timed is None:
+            self._timed = f'{self.text[:-1]},"wall_time":{self.wall_time!r}}}'
+        return self._timed
 
 
 def merge_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
-    """One ``step`` standing for several: the union of their cell changes (latest state per cell) and
-    the latest pose, sweep, target, progress and metrics; ``merged`` counts the steps it replaces."""
-    last = steps[-1]
+    """One ``step`` standing for several: the union of their cell changes (latest state per cell) and,
+    of every other field, the value in the latest step that has it (a step carries only what changed);
+    ``merged`` counts the steps it replaces."""
+    out: dict[str, Any] = {}
     cells: dict[tuple[int, int], int] = {}
     count = 0
     for s in steps:
-        for r, c, code in s["cells"]:
+        out.update(s)
+        for r, c, code in s.get("cells", ()):
             cells.pop((r, c), None)  # keep the order of the latest change
             cells[(r, c)] = code
         count += int(s.get("merged", 1))
-    out = dict(last)
-    out["cells"] = [[r, c, code] for (r, c), code in cells.items()]
+    out.pop("step", None)  # absent means "equal to seq": only the last step's own says otherwise
+    if "step" in steps[-1]:
+        out["step"] = steps[-1]["step"]
+    out.pop("cells", None)
+    if cells:
+        out["cells"] = [[r, c, code] for (r, c), code in cells.items()]
     out["merged"] = count
     return out
+
+
+def merge(items: list[Outgoing]) -> Outgoing:
+    """Steps queued for one viewer as one message, encoded when it is sent."""
+    return Outgoing(merge_steps([i.data for i in items]), merged=True, wall_time=items[-1].wall_time)
 
 
 @dataclass(eq=False)  # compared and hashed by identity: a viewer is a viewer
@@ -90,19 +111,20 @@ class Subscriber:
 
     def fold(self, first: Outgoing) -> Outgoing:
         """``first`` (a step about to be sent) merged with the steps queued right behind it."""
-        steps = [first.data]
+        steps = [first]
         while self.items and self.items[0].kind == "step":
-            steps.append(self.items.popleft().data)
+            steps.append(self.items.popleft())
         if len(steps) == 1:
             return first
         self.merges += 1
-        if self.shared is None or any("merged" in s for s in steps):
-            return Outgoing(merge_steps(steps), merged=True)
+        if self.shared is None or any("merged" in s.data for s in steps):
+            return merge(steps)
         # Viewers that keep pace fold the same steps: merge and encode them once for all.
-        key = (steps[0]["seq"], steps[-1]["seq"])
+        key = (steps[0].data["seq"], steps[-1].data["seq"])
         item = self.shared.get(key)
         if item is None:
-            item = self.shared[key] = Outgoing.of(merge_steps(steps))
+            item = self.shared[key] = merge(steps)
+            item.wire()
             while len(self.shared) > SHARED_MERGES:
                 self.shared.pop(next(iter(self.shared)))
         return item
@@ -127,12 +149,12 @@ class Subscriber:
         """Fold all pending steps into one; keep the newest status of each kind, the snapshot and a pong."""
         self.merges += 1
         pending = list(self.items)
-        steps = [i.data for i in pending if i.kind == "step"]
+        steps = [i for i in pending if i.kind == "step"]
         snapshot = next((i for i in reversed(pending) if i.kind == "snapshot"), None)
         if snapshot is not None:
             # Steps before the snapshot are already folded into it.
             after = pending[pending.index(snapshot) + 1 :]
-            steps = [i.data for i in after if i.kind == "step"]
+            steps = [i for i in after if i.kind == "step"]
         statuses: dict[str, Outgoing] = {}
         for i in pending:
             if i.kind == "status" and i.data.get("event") != "progress":
@@ -144,7 +166,7 @@ class Subscriber:
         if snapshot is not None:
             self.items.append(snapshot)
         if steps:
-            self.items.append(Outgoing(merge_steps(steps), merged=True))
+            self.items.append(merge(steps))
         self.items.extend(sorted(statuses.values(), key=lambda i: i.terminal))
         self.items.extend(others)
 

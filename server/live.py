@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 from robot.config import RobotConfig
 from robot.grid import GridSpec
 from server.broadcast import TERMINAL_EVENTS, Broadcaster, Outgoing, Subscriber
+from server.wire import VIEW_FIELDS, apply_step, trail_wire, view_from_checkpoint
 
-PROTOCOL_VERSION = 1
 GREY = 2  # wire code of an unknown / inaccessible cell; white 0 and black 1 match the map states
 TRAIL_LENGTH = 5000
 PROGRESS_PERIOD_S = 1.0
@@ -73,27 +73,22 @@ class LiveRun:
         self.terminated_by: str | None = None
         self.cells = np.full(grid.shape, GREY, dtype=np.uint8)
         self.seq = 0
-        self.pose: dict[str, float] | None = None
-        self.trail: deque[list[float]] = deque(maxlen=TRAIL_LENGTH)
-        self.sweep: list[float] | None = None
-        self.target: list[float] | None = None
-        self.progress: dict[str, Any] = {"step": 0, "sim_time_s": 0.0, "explored": None, "frontier": None}
-        self.metrics: dict[str, Any] | None = None
+        self.view: dict[str, Any] = {**VIEW_FIELDS, "step": 0}  # pose, sweep, ... in wire units
+        self.trail: deque[list[int | None]] = deque(maxlen=TRAIL_LENGTH)  # [x mm, y mm] after every step
         self.terminal: Outgoing | None = None
         self.broadcaster = Broadcaster()
+        self._snapshot: Outgoing | None = None  # encoded once for every viewer that joins until the next change
         self._last_progress = 0.0
 
     # -- state ---------------------------------------------------------------------------------
-    def load(self, states: NDArray[np.int8], view: dict[str, Any]) -> None:
+    def load(self, states: NDArray[np.int8], saved: dict[str, Any]) -> None:
         """Start from a checkpoint (a run that has ended): the map and the saved view state."""
         self.cells = state_codes(states)
-        self.seq = int(view.get("seq", 0))
-        self.pose = view.get("pose")
-        self.trail.extend(view.get("trail", []))
-        self.sweep = view.get("sweep")
-        self.target = view.get("target")
-        self.progress = view.get("progress", self.progress)
-        self.metrics = view.get("metrics")
+        self.seq = int(saved.get("seq", 0))
+        max_range_m = self.robot.get("max_range_m") if self.robot else None
+        self.view = view_from_checkpoint(saved, max_range_m)
+        self.trail.extend(trail_wire(saved.get("trail", [])))
+        self._snapshot = None
 
     def states(self) -> NDArray[np.int8]:
         """The map as viewers have it now (the live map.csv)."""
@@ -103,7 +98,13 @@ class LiveRun:
     def ended(self) -> bool:
         return self.terminal is not None
 
+    @property
+    def progress(self) -> dict[str, Any]:
+        v = self.view
+        return {"step": v["step"], "sim_time_s": v["t_s"], "explored": v["explored"], "frontier": v["frontier"]}
+
     def snapshot(self) -> dict[str, Any]:
+        v = self.view
         return {
             "type": "snapshot",
             "seq": self.seq,
@@ -112,27 +113,32 @@ class LiveRun:
             "cells": base64.b64encode(self.cells.tobytes()).decode(),
             "truth": self.truth_b64,
             "robot": self.robot,
-            "pose": self.pose,
+            "pose": v["pose"],
             "trail": list(self.trail),
-            "sweep": self.sweep,
-            "target": self.target,
+            "sweep": v["sweep"],
+            "target": v["target"],
+            "action": v["action"],
             "progress": self.progress,
-            "metrics": self.metrics,
+            "metrics": v["metrics"],
         }
 
+    def snapshot_message(self) -> Outgoing:
+        if self._snapshot is None:
+            self._snapshot = Outgoing.of(self.snapshot())
+        return self._snapshot
+
     # -- messages from the run thread ------------------------------------------------------------
-    def on_step(self, msg: dict[str, Any], text: str) -> None:
+    def on_step(self, msg: dict[str, Any], text: str, wall_time: float | None = None) -> None:
+        """A step as the run thread encoded it: only what changed since the step before."""
         self.seq = msg["seq"]
-        if msg["cells"]:
+        if "cells" in msg:
             changes = np.asarray(msg["cells"], dtype=np.int64)
             self.cells[changes[:, 0], changes[:, 1]] = changes[:, 2]
-        self.pose = msg["pose"]
-        self.trail.append([msg["pose"]["x"], msg["pose"]["y"]])
-        self.sweep = msg["sweep"]
-        self.target = msg["target"]
-        self.progress = msg["progress"]
-        self.metrics = msg["metrics"]
-        self.broadcaster.publish(Outgoing(msg, text))
+        apply_step(self.view, msg)
+        if self.view["pose"] is not None:
+            self.trail.append(self.view["pose"][:2])
+        self._snapshot = None
+        self.broadcaster.publish(Outgoing(msg, text, wall_time=wall_time))
         now = time.monotonic()
         if now - self._last_progress >= PROGRESS_PERIOD_S:
             self._last_progress = now
@@ -147,9 +153,10 @@ class LiveRun:
         elif event in TERMINAL_EVENTS:
             self.status = event
             self.terminated_by = extra.pop("terminated_by", self.terminated_by)
-            self.metrics = extra.get("metrics", self.metrics)
+            self.view["metrics"] = extra.get("metrics", self.view["metrics"])
         elif event == "speed":
             self.run["speed"] = extra["speed"]
+        self._snapshot = None
         msg = {
             "type": "status",
             "seq": self.seq,
@@ -167,7 +174,7 @@ class LiveRun:
     def subscribe(self) -> Subscriber:
         """A new viewer: its queue starts with a snapshot (and the closing status if the run has ended)."""
         sub = Subscriber(self.queue_size)
-        sub.put(Outgoing.of(self.snapshot()))
+        sub.put(self.snapshot_message())
         if self.terminal is not None:
             sub.put(self.terminal)
         else:
@@ -175,7 +182,7 @@ class LiveRun:
         return sub
 
     def resync(self, sub: Subscriber) -> None:
-        sub.reset(Outgoing.of(self.snapshot()))
+        sub.reset(self.snapshot_message())
 
     def unsubscribe(self, sub: Subscriber) -> None:
         self.broadcaster.remove(sub)

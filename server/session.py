@@ -29,6 +29,7 @@ from server.hardware import open_hardware, set_speed
 from server.live import GREY, TRAIL_LENGTH, LiveRun
 from server.plan import RunPlan
 from server.store import RunStore
+from server.wire import StepDeltas, point_wire, pose_wire, sweep_wire
 
 log = logging.getLogger("sonarslam.server")
 
@@ -85,8 +86,9 @@ class RunSession:
         self._stop = threading.Event()
         self._stop_reason = "stopped"
         self._speed = plan.speed
-        self._trail: deque[list[float]] = deque(maxlen=TRAIL_LENGTH)
-        self._view: dict[str, Any] = {"seq": 0}
+        self._trail: deque[list[float | None]] = deque(maxlen=TRAIL_LENGTH)
+        self._deltas = StepDeltas()
+        self._last: tuple[StepResult, int, dict[str, Any] | None, float | None] | None = None  # the latest step
         self.thread = threading.Thread(target=self._main, name=f"run-{run_id}", daemon=True)
 
     # -- control (any thread) --------------------------------------------------------------------
@@ -131,26 +133,37 @@ class RunSession:
 
     def _step_message(self, r: StepResult, seq: int, metrics: dict[str, Any] | None, explored: float | None
                       ) -> dict[str, Any]:  # fmt: skip
+        """The wire message: the step's values in the protocol's units, only those that changed."""
         codes = np.where(r.changed_states < 0, GREY, r.changed_states)
         cells = np.column_stack([r.changed_rows, r.changed_cols, codes]).tolist() if codes.size else []
-        pose = {"x": _num(r.pose.x, 4), "y": _num(r.pose.y, 4), "theta": _num(r.pose.theta, 4)}
-        sweep = [_num(v, 3) for v in r.sweep_ranges_m] if r.sweep_ranges_m is not None else None
-        target = [_num(r.target_xy[0], 4), _num(r.target_xy[1], 4)] if r.target_xy is not None else None
-        t_s = _num(r.t_s, 3)
-        return {
-            "type": "step",
-            "seq": seq,
-            "step": r.step,
-            "t_s": t_s,
-            "pose": pose,
-            "cells": cells,
-            "sweep": sweep,
-            "target": target,
+        sweep = r.sweep_ranges_m
+        values = {
+            "t_s": _num(r.t_s, 2),
+            "pose": pose_wire(r.pose.x, r.pose.y, r.pose.theta),
+            "sweep": sweep_wire(sweep, self.plan.robot.sonar.max_range_m) if sweep is not None else None,
+            "target": point_wire(*r.target_xy) if r.target_xy is not None else None,
             "action": r.action,
-            "progress": {"step": r.step, "sim_time_s": t_s, "explored": explored, "frontier": r.frontier_cells},
+            "explored": explored,
+            "frontier": r.frontier_cells,
             "metrics": metrics,
-            "wall_time": round(time.time(), 4),
         }
+        return self._deltas.message(seq, r.step, values, cells)
+
+    @staticmethod
+    def _view_of(r: StepResult, seq: int, metrics: dict[str, Any] | None, explored: float | None
+                 ) -> dict[str, Any]:  # fmt: skip
+        """What a viewer sees after this step, in metres and radians, as the checkpoint keeps it."""
+        sweep = r.sweep_ranges_m
+        return {
+            "seq": seq,
+            "pose": {"x": _num(r.pose.x, 4), "y": _num(r.pose.y, 4), "theta": _num(r.pose.theta, 4)},
+            "sweep": [_num(v, 3) for v in sweep] if sweep is not None else None,
+            "target": [_num(v, 4) for v in r.target_xy] if r.target_xy is not None else None,
+            "action": r.action,
+            "progress": {"step": r.step, "sim_time_s": _num(r.t_s, 2), "explored": explored,
+                         "frontier": r.frontier_cells},
+            "metrics": metrics,
+        }  # fmt: skip
 
     def _publish(self, r: StepResult, seq: int, metrics: dict[str, Any] | None, explored: float | None
                  ) -> tuple[dict[str, Any] | None, float | None]:  # fmt: skip
@@ -160,17 +173,17 @@ class RunSession:
             metrics = self._metrics()
             explored = explored_share(self.states, self.plan.truth) if self.plan.truth is not None else None
         msg = self._step_message(r, seq, metrics, explored)
-        self._view = {k: msg[k] for k in ("seq", "pose", "sweep", "target", "progress", "metrics")}
-        self._trail.append([msg["pose"]["x"], msg["pose"]["y"]])
-        self._post(self.live.on_step, msg, encode(msg))
+        self._last = (r, seq, metrics, explored)
+        self._trail.append([_num(r.pose.x, 4), _num(r.pose.y, 4)])
+        self._post(self.live.on_step, msg, encode(msg), round(time.time(), 4))
         return metrics, explored
 
     def _checkpoint(self, recorder: SensorLogWriter | None) -> None:
         if recorder is not None:
             recorder.flush()
-        view = {**self._view, "trail": list(self._trail)}
-        write_checkpoint(self.run_dir, self.states, self.plan, self.trajectory, view)
-        progress = self._view.get("progress") or {}
+        view: dict[str, Any] = self._view_of(*self._last) if self._last is not None else {"seq": 0}
+        write_checkpoint(self.run_dir, self.states, self.plan, self.trajectory, {**view, "trail": list(self._trail)})
+        progress = view.get("progress") or {}
         self.store.update(
             self.id,
             steps=int(progress.get("step", 0)),

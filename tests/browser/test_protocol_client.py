@@ -43,7 +43,7 @@ async () => {
   try {
     live.start();
     const first = sockets[0];
-    frame(first, { type: 'hello', protocol: 1, session: 'A' });
+    frame(first, { type: 'hello', protocol: 2, session: 'A' });
     frame(first, { type: 'snapshot', seq: 5, run: { status: 'running' } });
     frame(first, { type: 'step', seq: 5 });   // already in the snapshot
     frame(first, { type: 'step', seq: 6 });
@@ -55,14 +55,14 @@ async () => {
     first.onclose({ code: 1006 });            // dropped
     await wait(900);                           // the first retry comes after 0.5 s
     const second = sockets[1];
-    frame(second, { type: 'hello', protocol: 1, session: 'A' });
+    frame(second, { type: 'hello', protocol: 2, session: 'A' });
     frame(second, { type: 'snapshot', seq: 12, run: { status: 'running' } });
     frame(second, { type: 'step', seq: 13 });
     second.readyState = 3;
     second.onclose({ code: 1012 });
     await wait(900);
     const third = sockets[2];
-    frame(third, { type: 'hello', protocol: 1, session: 'B' });   // the service restarted
+    frame(third, { type: 'hello', protocol: 2, session: 'B' });   // the service restarted
     frame(third, { type: 'snapshot', seq: 2, run: { status: 'interrupted' } });
     frame(third, { type: 'status', seq: 2, event: 'interrupted', status: 'interrupted' });
     third.readyState = 3;
@@ -100,3 +100,33 @@ def test_live_client_follows_the_protocol_rules(dashboard: Dashboard) -> None:
     assert result["sockets"] == 3
     assert all(url.endswith("/ws/runs/r-20260101-0001") and url.startswith("ws://") for url in result["urls"])
     dashboard.assert_no_console_errors()
+
+
+# Runs in the page: the run's view folded from a snapshot and steps that carry only what changed.
+FOLD = """
+async () => {
+  const { viewFromSnapshot, applyStep } = await import('/js/live.js');
+  const view = viewFromSnapshot({
+    type: 'snapshot', seq: 3, pose: [1500, 300, 1571], trail: [[1500, 100], [1500, 300]],
+    sweep: [32, 400], target: [1500, 500], action: 'explore',
+    progress: { step: 3, sim_time_s: 4.5, explored: 0.25, frontier: 7 }, metrics: { f1: 0.5 },
+  });
+  applyStep(view, { type: 'step', seq: 4, t_s: 6.25, pose: [1500, 500, 1571], target: null });
+  const merged = { type: 'step', seq: 7, merged: 3, t_s: 9.5, sweep: [40, 123], explored: 0.5, metrics: { f1: 0.75 } };
+  applyStep(view, merged);
+  applyStep(view, { type: 'step', seq: 8, step: 7, action: 'stop' });
+  return view;
+}
+"""
+
+
+def test_the_page_folds_steps_that_carry_only_what_changed(dashboard: Dashboard) -> None:
+    dashboard.open()
+    view: dict[str, Any] = dashboard.page.evaluate(FOLD)
+    assert view["pose"] == {"x": 1.5, "y": 0.5, "theta": 1.571}  # metres and radians from mm and mrad
+    assert view["trail"] == [[1.5, 0.1], [1.5, 0.3], [1.5, 0.5], [1.5, 0.5], [1.5, 0.5]]  # one point per message
+    assert view["sweep"] == [0.4, 1.23]  # metres from cm
+    assert view["target"] is None  # sent as null: no target any more
+    assert view["action"] == "stop"
+    assert view["progress"] == {"step": 7, "sim_time_s": 9.5, "explored": 0.5, "frontier": 7}
+    assert view["metrics"] == {"f1": 0.75}

@@ -49,12 +49,20 @@ def csv_codes(text: str) -> NDArray[np.uint8]:
     return np.array([[GREY if v == "" else int(v) for v in row] for row in rows], dtype=np.uint8)
 
 
+# What a step carries only when it changed since the step before (docs/protocol.md), and where a viewer keeps it.
+SNAPSHOT_FIELDS = ("pose", "sweep", "target", "action", "metrics")
+PROGRESS_FIELDS = {"t_s": "sim_time_s", "explored": "explored", "frontier": "frontier"}
+
+
 @dataclass
 class Viewer:
-    """What one viewer saw. ``grid`` is None until the first snapshot."""
+    """What one viewer saw. ``grid`` is None until the first snapshot; ``view`` holds the latest pose
+    ([x mm, y mm, theta mrad]), sweep [cm], target [mm], action, progress and metrics, as sent."""
 
     hello: dict[str, Any] | None = None
     grid: NDArray[np.uint8] | None = None
+    view: dict[str, Any] = field(default_factory=dict)
+    trail: list[list[int]] = field(default_factory=list)
     seq: int = -1
     snapshots: int = 0
     steps: int = 0  # step messages applied
@@ -64,7 +72,7 @@ class Viewer:
     last_snapshot: dict[str, Any] | None = None
     close_code: int | None = None
     bytes_received: int = 0
-    latencies_s: list[float] = field(default_factory=list)  # server step end to arrival (wall clock)
+    latencies_s: list[float] = field(default_factory=list)  # step end to arrival (wall clock; ?timing=1)
     waiting_for_snapshot: bool = True
 
     @property
@@ -82,6 +90,9 @@ class Viewer:
         elif kind == "snapshot":
             g = msg["grid"]
             self.grid = decode_cells(msg["cells"], g["rows"], g["cols"])
+            self.view = {key: msg[key] for key in SNAPSHOT_FIELDS}
+            self.view["progress"] = dict(msg["progress"])
+            self.trail = list(msg["trail"])
             self.seq = msg["seq"]
             self.snapshots += 1
             self.last_snapshot = msg
@@ -96,8 +107,18 @@ class Viewer:
                 self.waiting_for_snapshot = True
                 await ws.send(json.dumps({"type": "resync"}))
                 return
-            for r, c, code in msg["cells"]:
+            for r, c, code in msg.get("cells", []):
                 self.grid[r, c] = code
+            for key in SNAPSHOT_FIELDS:
+                if key in msg:
+                    self.view[key] = msg[key]
+            progress = self.view["progress"]
+            progress["step"] = msg.get("step", msg["seq"])
+            for key, name in PROGRESS_FIELDS.items():
+                if key in msg:
+                    progress[name] = msg[key]
+            if self.view["pose"] is not None:
+                self.trail.append(self.view["pose"][:2])
             self.seq = msg["seq"]
             self.steps += 1
             self.merged_steps += 1 if msg.get("merged") else 0

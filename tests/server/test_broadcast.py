@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 from live_client import run_async
@@ -108,3 +109,48 @@ def test_viewers_that_keep_pace_share_one_merged_message() -> None:
     assert merged_a.data["seq"] == 4 and merged_a.data["merged"] == 4
     assert '"merged":4' in merged_a.wire()
     assert not a.items and not b.items
+
+
+def test_a_merged_step_carries_the_latest_value_of_every_field_that_any_merged_step_carried() -> None:
+    # Each step carries only what changed since the one before it.
+    steps = [
+        {"type": "step", "seq": 5, "t_s": 1.0, "pose": [100, 0, 0], "sweep": [30, 400], "action": "explore"},
+        {"type": "step", "seq": 6, "t_s": 2.0, "pose": [300, 0, 0], "cells": [[1, 1, 0]], "metrics": {"f1": 0.5}},
+        {"type": "step", "seq": 7, "t_s": 3.0, "target": None},
+    ]
+    assert merge_steps(steps) == {
+        "type": "step",
+        "seq": 7,
+        "t_s": 3.0,
+        "pose": [300, 0, 0],
+        "sweep": [30, 400],
+        "action": "explore",
+        "metrics": {"f1": 0.5},
+        "target": None,
+        "cells": [[1, 1, 0]],
+        "merged": 3,
+    }
+    # ``step`` is sent only when it is not ``seq`` (the stop step): only the last step's own counts.
+    stop = {"type": "step", "seq": 8, "step": 7, "action": "stop"}
+    assert merge_steps([steps[0], stop])["step"] == 7
+    assert "step" not in merge_steps([stop, {"type": "step", "seq": 9, "t_s": 4.0}])
+
+
+def test_only_viewers_that_ask_for_timing_get_the_wall_time() -> None:
+    first = Outgoing.of({"type": "step", "seq": 1, "pose": [1, 2, 3]}, wall_time=1795312345.1234)
+    assert first.wire() == '{"type":"step","seq":1,"pose":[1,2,3]}'
+    assert json.loads(first.wire(timing=True)) == {
+        "type": "step",
+        "seq": 1,
+        "pose": [1, 2, 3],
+        "wall_time": 1795312345.1234,
+    }
+
+    hub = Broadcaster()
+    sub = Subscriber(100)
+    hub.add(sub)
+    hub.publish(first)
+    hub.publish(Outgoing.of({"type": "step", "seq": 2, "t_s": 2.0}, wall_time=1795312345.5))
+    merged = sub.fold(sub.items.popleft())
+    assert json.loads(merged.wire(timing=True))["wall_time"] == 1795312345.5  # the last merged step's
+    assert "wall_time" not in merged.wire()

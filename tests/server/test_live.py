@@ -49,17 +49,54 @@ def assert_same_map(viewer: Viewer, api: httpx.Client, run_id: str) -> None:
     assert diff.size == 0, f"{len(diff)} cells differ, first at {diff[:5].tolist()}"
 
 
+LIVE_METRICS = ("f1", "precision", "recall", "error_ratio", "cell_errors")
+
+
+def final_state(api: httpx.Client, run_id: str) -> dict[str, Any]:
+    """An ended run as REST tells it: progress, metrics, the last pose and the last sonar sweep."""
+    run = api.get(f"/api/runs/{run_id}").json()
+    trajectory = api.get(f"/api/runs/{run_id}/trajectory.csv").text.strip().split("\n")
+    _, x, y, theta = (float(v) for v in trajectory[-1].split(",")[:4])
+    sweeps = [line for line in api.get(f"/api/runs/{run_id}/sensors.log").text.split("\n") if line.startswith("S ")]
+    return {
+        "progress": run["progress"],
+        "metrics": run["metrics"],
+        "pose": (x, y, theta),
+        "sweep": [float(v) for v in sweeps[-1].split()[2:]],
+    }
+
+
+def assert_same_state(viewer: Viewer, api: httpx.Client, run_id: str) -> None:
+    """The grid, pose, sweep, progress and scores a viewer rebuilt from snapshot + deltas are the run's
+    final ones (to the protocol's rounding: mm, mrad, cm, scores to 4 decimals)."""
+    assert_same_map(viewer, api, run_id)
+    final = final_state(api, run_id)
+    assert viewer.view["progress"] == final["progress"]
+    live_metrics = {k: round(v, 4) if isinstance(v, float) else v for k, v in final["metrics"].items()}
+    assert viewer.view["metrics"] == {k: live_metrics[k] for k in LIVE_METRICS}
+    pose = viewer.view["pose"]
+    assert all(isinstance(v, int) for v in pose)
+    assert np.allclose(np.array(pose) / 1000, final["pose"], rtol=0, atol=0.0006), (pose, final["pose"])
+    assert viewer.last_snapshot is not None
+    max_range_cm = round(viewer.last_snapshot["robot"]["max_range_m"] * 100)
+    for cm, range_m in zip(viewer.view["sweep"], final["sweep"], strict=True):
+        if range_m >= max_range_cm / 100:
+            assert cm == max_range_cm  # no echo
+        else:
+            assert cm < max_range_cm and abs(cm / 100 - range_m) <= 0.005 + 1e-9, (cm, range_m)
+
+
 def test_one_viewer_rebuilds_the_map_cell_for_cell(server: LiveServer, api: httpx.Client) -> None:
     run_id = start_run(api)
     viewer = run_async(watch(f"{server.ws_url}/ws/runs/{run_id}"))
 
-    assert viewer.hello is not None and viewer.hello["run_id"] == run_id and viewer.hello["protocol"] == 1
+    assert viewer.hello is not None and viewer.hello["run_id"] == run_id and viewer.hello["protocol"] == 2
     assert viewer.close_code == 1000
     final = viewer.final_status
     assert final is not None and final["event"] == "finished" and final["terminated_by"] == "safety_cap"
     assert viewer.snapshots == 1 and viewer.resyncs == 0
     assert viewer.seq == final["seq"] == 60  # one step message per engine step, with consecutive seq
-    assert_same_map(viewer, api, run_id)
+    assert_same_state(viewer, api, run_id)
     assert (viewer.grid == 0).any() and (viewer.grid == 1).any()  # it really mapped something
 
     snap = viewer.last_snapshot
@@ -96,6 +133,87 @@ def test_several_viewers_all_rebuild_the_same_map(server: LiveServer, api: httpx
     assert len(sessions) == 1
 
 
+def test_merged_steps_and_viewers_that_join_or_resync_late_all_end_with_the_final_state(
+    make_server: Any,
+) -> None:
+    server: LiveServer = make_server(ws_max_rate_hz=20)  # a max-speed run: most steps go out merged
+    with server.client() as api:
+        run_id = start_run(api, world="room1", max_steps=250)
+        url = f"{server.ws_url}/ws/runs/{run_id}"
+
+        async def resync_at_step_40(viewer: Viewer, msg: dict[str, Any], ws: Any) -> None:
+            if msg["type"] == "step" and msg["seq"] >= 40 and viewer.snapshots == 1 and not viewer.waiting_for_snapshot:
+                viewer.waiting_for_snapshot = True
+                await ws.send(json.dumps({"type": "resync"}))
+
+        async def late(delay_s: float) -> Viewer:
+            await asyncio.sleep(delay_s)
+            return await watch(url)
+
+        async def all_viewers() -> list[Viewer]:
+            return list(
+                await asyncio.gather(
+                    watch(url), watch(url, read_delay_s=0.03), watch(url, on_message=resync_at_step_40), late(0.4)
+                )
+            )
+
+        viewers = run_async(all_viewers())
+        assert wait_ended(api, run_id)["status"] == "finished"
+        for viewer in viewers:
+            assert viewer.close_code == 1000 and viewer.resyncs == 0
+            assert viewer.final_status is not None and viewer.seq == viewer.final_status["seq"]
+            assert_same_state(viewer, api, run_id)
+        assert all(v.merged_steps > 0 for v in viewers)
+        assert viewers[2].snapshots == 2
+        # Target and action have no REST counterpart: every viewer agrees with the ended run's snapshot.
+        after = run_async(watch(url, timeout_s=20))
+        assert after.steps == 0
+        for viewer in viewers:
+            assert viewer.view["target"] == after.view["target"]
+            assert viewer.view["action"] == after.view["action"] is not None
+            assert np.abs(np.array(viewer.view["pose"]) - after.view["pose"]).max() <= 1
+            assert viewer.view["sweep"] == after.view["sweep"]
+
+
+def test_steps_carry_only_what_changed_and_timing_only_on_request(make_server: Any) -> None:
+    server: LiveServer = make_server(ws_max_rate_hz=10_000)  # every step on its own
+    steps: dict[str, list[dict[str, Any]]] = {"plain": [], "timed": []}
+
+    async def plain_step(viewer: Viewer, msg: dict[str, Any], ws: Any) -> None:
+        if msg["type"] == "step":
+            steps["plain"].append(msg)
+
+    async def timed_step(viewer: Viewer, msg: dict[str, Any], ws: Any) -> None:
+        if msg["type"] == "step":
+            steps["timed"].append(msg)
+
+    with server.client() as api:
+        run_id = start_run(api, world="room1", max_steps=120)
+        url = f"{server.ws_url}/ws/runs/{run_id}"
+
+        async def both() -> list[Viewer]:
+            return list(
+                await asyncio.gather(watch(url, on_message=plain_step), watch(f"{url}?timing=1", on_message=timed_step))
+            )
+
+        viewers = run_async(both())
+        for viewer in viewers:
+            assert_same_state(viewer, api, run_id)
+    plain, timed = steps["plain"], steps["timed"]
+    for viewer, seen in zip(viewers, (plain, timed), strict=True):
+        assert viewer.last_snapshot is not None  # the run may have begun before the viewer came
+        assert sum(m.get("merged", 1) for m in seen) == 120 - viewer.last_snapshot["seq"]
+    assert not any("wall_time" in m for m in plain)
+    assert all(isinstance(m["wall_time"], float) for m in timed)
+    assert len(viewers[1].latencies_s) == len(timed)
+    # The scores change with the map, and only then (the first step brings those of the empty map).
+    for m in plain:
+        assert m["seq"] == 1 or (("metrics" in m) <= ("cells" in m) and ("explored" in m) <= ("cells" in m))
+    assert 0 < sum("cells" in m for m in plain) < len(plain)
+    assert 0 < sum("action" in m for m in plain) < len(plain) / 2
+    assert all(set(m) >= {"type", "seq", "t_s", "pose"} for m in plain)  # the robot moves every step
+
+
 def test_a_finished_run_sends_hello_snapshot_status_then_closes(server: LiveServer, api: httpx.Client) -> None:
     run_id = start_run(api, max_steps=20)
     wait_ended(api, run_id)
@@ -126,7 +244,8 @@ def test_stop_mid_run_keeps_the_partial_map(server: LiveServer, api: httpx.Clien
     assert viewer.final_status is not None and viewer.final_status["event"] == "stopped"
     assert viewer.close_code == 1000
     assert stopped["at"] <= viewer.seq == viewer.final_status["seq"] < 5000
-    assert_same_map(viewer, api, run_id)
+    assert_same_state(viewer, api, run_id)
+    assert viewer.view["action"] == "stop" and viewer.view["progress"]["step"] == viewer.seq - 1
     assert (viewer.grid == 0).sum() > 5  # the partial map is kept
     assert api.post(f"/api/runs/{run_id}/stop").status_code == 409  # already ended
 
@@ -153,7 +272,7 @@ def test_reconnect_mid_run_and_resync(server: LiveServer, api: httpx.Client) -> 
     assert second.last_snapshot is not None and second.last_snapshot["seq"] >= 10
     assert second.close_code == 1000 and second.final_status is not None
     assert second.seq == second.final_status["seq"]
-    assert_same_map(second, api, run_id)
+    assert_same_state(second, api, run_id)
 
 
 def _raw_websocket(port: int, path: str) -> socket.socket:
@@ -174,7 +293,7 @@ def _raw_websocket(port: int, path: str) -> socket.socket:
     return sock
 
 
-BIG_HALL = """name = "hall"
+BIG_HALL = """name = "bighall"
 description = "a 12 x 12 m empty hall: a big grid, so that snapshots are large"
 boundary = [[0.0, 0.0], [12.0, 0.0], [12.0, 12.0], [0.0, 12.0]]
 [start]
@@ -187,8 +306,8 @@ theta_deg = 90.0
 def test_a_viewer_that_never_reads_does_not_stall_the_run(make_server: Any) -> None:
     server: LiveServer = make_server(small_buffers=True, ws_queue_size=8, ws_max_rate_hz=10_000)
     with server.client() as api:
-        assert api.post("/api/worlds", files={"file": ("hall.toml", BIG_HALL)}).status_code == 201
-        run_id = start_run(api, world="hall", resolution=0.1, max_steps=400)
+        assert api.post("/api/worlds", files={"file": ("bighall.toml", BIG_HALL)}).status_code == 201
+        run_id = start_run(api, world="bighall", resolution=0.1, max_steps=400)
         stuck = _raw_websocket(server.port, f"/ws/runs/{run_id}")  # never reads, stays connected throughout
         try:
             slow = run_async(_fall_behind_then_read(server, run_id))

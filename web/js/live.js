@@ -1,4 +1,5 @@
-// One viewer's WebSocket to a run (docs/protocol.md): hello, snapshot, gap-free steps, resync, reconnect.
+// One viewer's WebSocket to a run (docs/protocol.md): hello, snapshot, gap-free steps, resync, reconnect;
+// and the run's view (pose, sweep, target, progress, ...) folded from a snapshot and the steps after it.
 
 const TERMINAL = new Set(['finished', 'stopped', 'error', 'interrupted']);
 const BACKOFF_FIRST_MS = 500;
@@ -10,6 +11,52 @@ export function isTerminal(status) {
   return TERMINAL.has(status);
 }
 
+// -- the run's view: steps carry only what changed, in integer units ---------------------------------
+const MILLI = 1000; // positions in millimetres, angles in milliradians
+const CENTI = 100; // sonar ranges in centimetres
+
+function poseOf(p) {
+  return Array.isArray(p) && p.length >= 3 ? { x: p[0] / MILLI, y: p[1] / MILLI, theta: p[2] / MILLI } : null;
+}
+
+function pointOf(p) {
+  return Array.isArray(p) && p.length >= 2 ? [p[0] / MILLI, p[1] / MILLI] : null;
+}
+
+function sweepOf(ranges) {
+  return Array.isArray(ranges) ? ranges.map((v) => (typeof v === 'number' ? v / CENTI : null)) : null;
+}
+
+/** What a snapshot says about the run, in metres and radians: {pose, trail, sweep, target, action, progress, metrics}. */
+export function viewFromSnapshot(msg) {
+  return {
+    pose: poseOf(msg.pose),
+    trail: Array.isArray(msg.trail) ? msg.trail.map(pointOf).filter(Boolean) : [],
+    sweep: sweepOf(msg.sweep),
+    target: pointOf(msg.target),
+    action: msg.action ?? null,
+    progress: { ...(msg.progress || {}) },
+    metrics: msg.metrics ?? null,
+  };
+}
+
+/** Fold a step (or a merged run of steps) into a view: a field the step leaves out has not changed. */
+export function applyStep(view, msg) {
+  if ('pose' in msg) view.pose = poseOf(msg.pose);
+  if ('sweep' in msg) view.sweep = sweepOf(msg.sweep);
+  if ('target' in msg) view.target = pointOf(msg.target);
+  if ('action' in msg) view.action = msg.action;
+  if ('metrics' in msg) view.metrics = msg.metrics;
+  const progress = { ...view.progress, step: msg.step ?? msg.seq };
+  if ('t_s' in msg) progress.sim_time_s = msg.t_s;
+  if ('explored' in msg) progress.explored = msg.explored;
+  if ('frontier' in msg) progress.frontier = msg.frontier;
+  view.progress = progress;
+  if (view.pose) view.trail.push([view.pose.x, view.pose.y]);
+  return view;
+}
+
+// -- the socket ------------------------------------------------------------------------------------
 /** The WebSocket URL for a path on this page's host; the token rides in the query because a
  * browser cannot set headers on a WebSocket handshake. */
 export function wsUrl(path, token) {

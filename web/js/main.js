@@ -3,7 +3,7 @@
 
 import { Api, ApiError, adoptTokenFromUrl } from './api.js';
 import { CellLayer, MAP_PALETTE, TRUTH_PALETTE, decodeBase64 } from './gridlayer.js';
-import { LiveRun, isTerminal } from './live.js';
+import { LiveRun, applyStep, isTerminal, viewFromSnapshot } from './live.js';
 import { MapView } from './mapview.js';
 import {
   StatusPanel,
@@ -53,6 +53,7 @@ const view = new MapView($('map'), {
 });
 const panel = new StatusPanel(document);
 const sessionRef = { current: null };
+let runView = null; // the open run's pose, trail, sweep, target, action, progress and metrics
 
 const app = {
   runId: null,
@@ -151,47 +152,51 @@ function onSnapshot(msg, { restarted }) {
   view.setLayer('truth', truthBox.checked);
 
   view.robot = msg.robot || null;
-  view.pose = msg.pose || null;
-  view.trail = Array.isArray(msg.trail) ? msg.trail.slice(-TRAIL_MAX) : [];
-  view.sweep = msg.sweep || null;
-  view.target = msg.target || null;
+  runView = viewFromSnapshot(msg);
+  showRunView();
   view.setGrid(grid);
   $('map-empty').hidden = true;
 
   app.run = { ...run };
-  app.progress = msg.progress || null;
-  app.metrics = msg.metrics || null;
-  app.action = msg.action || app.action;
   $('run-title').textContent = `${runLabel({ ...run, id: app.runId })} (${app.runId})`;
   renderPanel();
 }
 
 function onStep(msg) {
   app.counters.steps += 1;
-  mapLayer.patch(msg.cells);
-  if (msg.pose) {
-    view.pose = msg.pose;
-    view.trail.push([msg.pose.x, msg.pose.y]);
-    if (view.trail.length > TRAIL_MAX) view.trail.splice(0, view.trail.length - TRAIL_MAX);
-  }
-  if ('sweep' in msg) view.sweep = msg.sweep;
-  if ('target' in msg) view.target = msg.target;
-  if (msg.action) app.action = msg.action;
-  app.progress = msg.progress || { ...app.progress, step: msg.step, sim_time_s: msg.t_s };
-  if ('metrics' in msg) app.metrics = msg.metrics;
+  if (!runView) return;
+  mapLayer.patch(msg.cells || []);
+  applyStep(runView, msg);
+  const trail = runView.trail;
+  if (trail.length > TRAIL_MAX) trail.splice(0, trail.length - TRAIL_MAX);
+  showRunView();
   view.requestDraw();
   renderPanel();
+}
+
+/** The run's view (folded by live.js, in metres) to the map and the panel. */
+function showRunView() {
+  view.pose = runView.pose;
+  view.trail = runView.trail;
+  view.sweep = runView.sweep;
+  view.target = runView.target;
+  app.progress = runView.progress;
+  app.metrics = runView.metrics;
+  app.action = runView.action;
 }
 
 function onStatus(msg) {
   if (msg.status) app.run.status = msg.status;
   if ('terminated_by' in msg) app.run.terminated_by = msg.terminated_by;
-  if (msg.metrics) app.metrics = msg.metrics;
-  if (msg.progress) app.progress = msg.progress;
   if ('speed' in msg) app.run.speed = msg.speed;
   if (msg.event === 'error' && msg.message) say('run-message', `The run failed: ${msg.message}`);
   if (msg.event !== 'progress' && msg.event !== 'speed') refreshRuns();
-  if (isTerminal(msg.status)) app.action = null;
+  if (runView) {
+    if (msg.metrics) runView.metrics = msg.metrics; // the closing scores, at full precision
+    if (msg.progress) runView.progress = { ...msg.progress };
+    if (isTerminal(msg.status)) runView.action = null;
+    showRunView();
+  }
   renderPanel();
   showConnection($('conn').dataset.state);
 }
@@ -223,6 +228,7 @@ function setDownloads(id) {
 function closeRun() {
   if (app.live) app.live.close();
   app.live = null;
+  runView = null;
   app.runId = null;
   app.run = {};
   app.progress = null;

@@ -13,8 +13,9 @@ from starlette.websockets import WebSocketDisconnect
 
 from server.api.deps import get_manager, get_settings, token_ok
 from server.broadcast import Outgoing, Subscriber, encode
-from server.live import PROTOCOL_VERSION, LiveRun
+from server.live import LiveRun
 from server.models import RUN_ID_PATTERN
+from server.wire import PROTOCOL_VERSION
 
 router = APIRouter()
 _RUN_ID = re.compile(RUN_ID_PATTERN)
@@ -75,6 +76,7 @@ async def live_run(websocket: WebSocket, run_id: str) -> None:
     sub = live.subscribe()
     reader = asyncio.create_task(_read(websocket, live, sub))
     min_interval_s = 1.0 / settings.ws_max_rate_hz
+    timing = websocket.query_params.get("timing") == "1"  # steps also say when they ended on the server
     loop = asyncio.get_running_loop()
     try:
         hello = {"type": "hello", "protocol": PROTOCOL_VERSION, "session": websocket.app.state.session_id}
@@ -82,7 +84,7 @@ async def live_run(websocket: WebSocket, run_id: str) -> None:
         while (item := await sub.get()) is not None:
             if item.kind == "step":
                 item = sub.fold(item)  # the steps that came while this viewer was served go as one
-            await websocket.send_text(item.wire())
+            await websocket.send_text(item.wire(timing))
             if item.terminal:
                 await websocket.close(code=1000)
                 break
