@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot.engine import SlamEngine, StepResult
+from robot.errors import HardwareError
 from robot.hardware import Hardware
 from robot.mapio import atomic_write_bytes, write_map_files
 from robot.metrics import score
@@ -25,7 +26,7 @@ from robot.runner import log_metadata, trajectory_csv
 from robot.sensorlog import SensorLogWriter
 from robot.sim import SimRobot
 from server.broadcast import encode
-from server.hardware import open_hardware, set_speed
+from server.hardware import halt, open_hardware, set_speed
 from server.live import GREY, TRAIL_LENGTH, LiveRun
 from server.plan import RunPlan
 from server.store import RunStore
@@ -85,6 +86,7 @@ class RunSession:
         self.states = plan.grid.empty()
         self._stop = threading.Event()
         self._stop_reason = "stopped"
+        self._halted = False  # real motors were halted by a stop request
         self._speed = plan.speed
         self._trail: deque[list[float | None]] = deque(maxlen=TRAIL_LENGTH)
         self._deltas = StepDeltas()
@@ -96,13 +98,18 @@ class RunSession:
         self.thread.start()
 
     def request_stop(self, reason: str = "stopped") -> None:
-        """End after the current step; the step finishes at full speed so that stopping is prompt."""
+        """End after the current step; the step finishes at full speed so that stopping is prompt.
+
+        Real motors stop at once: the robot's next hardware call in the step fails, and the run ends
+        as stopped with the map it has (rather than driving on to the end of a cell move)."""
         if not self._stop.is_set():
             self._stop_reason = reason
             self._stop.set()
         hw = self.hw
         if hw is not None:
             set_speed(hw, None)
+            if halt(hw, f"run {reason}"):
+                self._halted = True
 
     def set_speed(self, speed: float | None) -> None:
         self._speed = speed
@@ -221,7 +228,12 @@ class RunSession:
                         seq += 1
                         metrics, explored = self._publish(final, seq, metrics, explored)
                     break
-                r = engine.step()
+                try:
+                    r = engine.step()
+                except HardwareError:
+                    if self._halted:
+                        continue  # a stop halted the motors mid-step: settle the map and end as stopped
+                    raise
                 self._record(engine, hw)
                 seq += 1
                 metrics, explored = self._publish(r, seq, metrics, explored)
