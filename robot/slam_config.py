@@ -29,7 +29,10 @@ class SlamConfig(BaseModel):
     max_sim_time_s: float = Field(default=6 * 3600.0, gt=0.0)  # safety cap on clock time
     max_steps: int = Field(default=20000, ge=1)  # safety cap on steps
     max_inspections: int = Field(default=2, ge=1, le=10)
-    inspect_walls: bool = True  # also inspect occupied cells between the explored area and unknown space
+    # Also inspect occupied cells between the explored area and unknown space (a false echo may close
+    # off a passage). Off by default: over 6 seeds of 8 worlds it moved F1 by +0.001 (noise) and took
+    # 30-40 % more steps.
+    inspect_walls: bool = False
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()
