@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot.engine import SlamEngine, StepResult
-from robot.errors import HardwareError
+from robot.errors import HardwareError, SonarSlamError
 from robot.hardware import Hardware
 from robot.mapio import atomic_write_bytes, write_map_files
 from robot.metrics import score
@@ -241,6 +241,9 @@ class RunSession:
                     self._checkpoint(recorder)
                     last_checkpoint = time.monotonic()
             status, terminated_by = self._end_status(engine.stats.terminated_by)
+        except SonarSlamError as exc:  # an expected failure (a device missing, a bad setting): one line
+            log.error("run %s failed: %s: %s", self.id, type(exc).__name__, exc)
+            status, terminated_by, error = "error", "error", f"{type(exc).__name__}: {exc}"
         except Exception as exc:
             log.exception("run %s failed", self.id)
             status, terminated_by, error = "error", "error", f"{type(exc).__name__}: {exc}"

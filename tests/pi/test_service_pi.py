@@ -253,7 +253,9 @@ def test_a_robot_run_streams_stops_and_leaves_the_motors_off(
     assert motor_states() == MOTORS_OFF
 
 
-def test_an_imu_that_is_not_an_mpu6050_ends_the_run_as_error(service: PiService, motor_states: Any) -> None:
+def test_an_imu_that_is_not_an_mpu6050_ends_the_run_as_error(
+    service: PiService, motor_states: Any, caplog: pytest.LogCaptureFixture
+) -> None:
     api, robot, live = service.api, service.robot, service.live
     robot.who_am_i = 0x71  # an MPU-9250 answers at the same address
     run_id = start_run(api)["id"]
@@ -261,6 +263,9 @@ def test_an_imu_that_is_not_an_mpu6050_ends_the_run_as_error(service: PiService,
     assert run["status"] == "error" and run["terminated_by"] == "error"
     error = run["error"]
     assert "WHO_AM_I reads 0x71, expected 0x68" in error and "\n" not in error and "Traceback" not in error
+    # The service log says it in one line too: an expected failure is not a crash with a traceback.
+    failed = [r for r in caplog.records if r.name == "sonarslam.server" and f"run {run_id} failed" in r.getMessage()]
+    assert failed and all(r.exc_info is None for r in failed) and "WHO_AM_I" in failed[0].getMessage()
 
     viewer = run_async(watch(f"{live.ws_url}/ws/runs/{run_id}", timeout_s=TIMEOUT_S))
     assert viewer.final_status is not None and viewer.final_status["event"] == "error"
