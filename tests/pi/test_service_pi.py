@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import signal
 import threading
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import httpx
+import live_client
 import numpy as np
 import pytest
 from live_client import Viewer, csv_codes, run_async, watch
@@ -152,13 +152,7 @@ def start_run(api: httpx.Client, **options: Any) -> dict[str, Any]:
 
 
 def wait_ended(api: httpx.Client, run_id: str, timeout_s: float = TIMEOUT_S) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        run = api.get(f"/api/runs/{run_id}").json()
-        if run["status"] not in ("queued", "running"):
-            return dict(run)
-        time.sleep(0.05)
-    raise AssertionError(f"run {run_id} did not end within {timeout_s} s")
+    return live_client.wait_ended(api, run_id, timeout_s)
 
 
 def watchdog_running() -> bool:

@@ -20,6 +20,17 @@ TERMINAL = {"finished", "stopped", "error", "interrupted"}
 T = TypeVar("T")
 
 
+def wait_ended(api: Any, run_id: str, timeout_s: float = 90.0) -> dict[str, Any]:
+    """Poll ``GET /api/runs/{id}`` (``api``: an httpx client on the service) until the run has ended."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        run = api.get(f"/api/runs/{run_id}").json()
+        if run["status"] not in ("queued", "running"):
+            return dict(run)
+        time.sleep(0.05)
+    raise AssertionError(f"run {run_id} did not end within {timeout_s} s")
+
+
 def run_async(coro: Coroutine[Any, Any, T]) -> T:
     """``asyncio.run`` on a thread of its own: it works even when the calling thread already runs an
     event loop (Playwright's sync API, used by the browser tests in the same session, leaves one)."""

@@ -11,7 +11,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from live_client import csv_codes, run_async, watch
+from live_client import csv_codes, run_async, wait_ended, watch
 from live_server import LiveServer
 
 from robot.errors import HardwareError
@@ -34,14 +34,6 @@ radius = 0.2
 """
 
 
-def wait_ended(api: httpx.Client, run_id: str, timeout_s: float = 90.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        run = api.get(f"/api/runs/{run_id}").json()
-        if run["status"] not in ("queued", "running"):
-            return dict(run)
-        time.sleep(0.05)
-    raise AssertionError(f"run {run_id} did not end within {timeout_s} s")
 
 
 def field_of(response: httpx.Response) -> list[Any]:

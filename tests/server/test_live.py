@@ -5,12 +5,11 @@ from __future__ import annotations
 import asyncio
 import json
 import socket
-import time
 from typing import Any
 
 import httpx
 import numpy as np
-from live_client import GREY, Viewer, csv_codes, decode_cells, run_async, watch
+from live_client import GREY, Viewer, csv_codes, decode_cells, run_async, wait_ended, watch
 from live_server import LiveServer
 from websockets.asyncio.client import connect
 
@@ -25,14 +24,6 @@ def start_run(api: httpx.Client, **options: Any) -> str:
     return str(body["id"])
 
 
-def wait_ended(api: httpx.Client, run_id: str, timeout_s: float = 90.0) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        run = api.get(f"/api/runs/{run_id}").json()
-        if run["status"] not in ("queued", "running"):
-            return dict(run)
-        time.sleep(0.05)
-    raise AssertionError(f"run {run_id} did not end within {timeout_s} s")
 
 
 def map_codes(api: httpx.Client, run_id: str) -> np.ndarray:
