@@ -57,12 +57,20 @@ class Outgoing:
 def merge_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
     """One ``step`` standing for several: the union of their cell changes (latest state per cell) and,
     of every other field, the value in the latest step that has it (a step carries only what changed);
+    ``trail`` the positions the earlier steps ended at, so a viewer's trail keeps every corner;
     ``merged`` counts the steps it replaces."""
     out: dict[str, Any] = {}
     cells: dict[tuple[int, int], int] = {}
+    trail: list[list[int]] = []  # where the robot ended each step but the last (whose end is ``pose``)
     count = 0
-    for s in steps:
+    for i, s in enumerate(steps):
         out.update(s)
+        trail.extend(s.get("trail") or ())
+        if i < len(steps) - 1:
+            if s.get("pose") is not None:
+                trail.append(list(s["pose"][:2]))
+            elif trail:
+                trail.append(trail[-1])
         for r, c, code in s.get("cells", ()):
             cells.pop((r, c), None)  # keep the order of the latest change
             cells[(r, c)] = code
@@ -70,6 +78,9 @@ def merge_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
     out.pop("step", None)  # absent means "equal to seq": only the last step's own says otherwise
     if "step" in steps[-1]:
         out["step"] = steps[-1]["step"]
+    out.pop("trail", None)
+    if trail:
+        out["trail"] = trail
     out.pop("cells", None)
     if cells:
         out["cells"] = [[r, c, code] for (r, c), code in cells.items()]

@@ -112,7 +112,10 @@ async () => {
     progress: { step: 3, sim_time_s: 4.5, explored: 0.25, frontier: 7 }, metrics: { f1: 0.5 },
   });
   applyStep(view, { type: 'step', seq: 4, t_s: 6.25, pose: [1500, 500, 1571], target: null });
-  const merged = { type: 'step', seq: 7, merged: 3, t_s: 9.5, sweep: [40, 123], explored: 0.5, metrics: { f1: 0.75 } };
+  const merged = {
+    type: 'step', seq: 7, merged: 3, t_s: 9.5, sweep: [40, 123], explored: 0.5, metrics: { f1: 0.75 },
+    pose: [1700, 700, 0], trail: [[1500, 700], [1600, 700]],
+  };
   applyStep(view, merged);
   applyStep(view, { type: 'step', seq: 8, step: 7, action: 'stop' });
   return view;
@@ -123,8 +126,9 @@ async () => {
 def test_the_page_folds_steps_that_carry_only_what_changed(dashboard: Dashboard) -> None:
     dashboard.open()
     view: dict[str, Any] = dashboard.page.evaluate(FOLD)
-    assert view["pose"] == {"x": 1.5, "y": 0.5, "theta": 1.571}  # metres and radians from mm and mrad
-    assert view["trail"] == [[1.5, 0.1], [1.5, 0.3], [1.5, 0.5], [1.5, 0.5], [1.5, 0.5]]  # one point per message
+    assert view["pose"] == {"x": 1.7, "y": 0.7, "theta": 0.0}  # metres and radians from mm and mrad
+    # One point per step: a merged step brings the ends of the steps it stands for, then its pose.
+    assert view["trail"] == [[1.5, 0.1], [1.5, 0.3], [1.5, 0.5], [1.5, 0.7], [1.6, 0.7], [1.7, 0.7], [1.7, 0.7]]
     assert view["sweep"] == [0.4, 1.23]  # metres from cm
     assert view["target"] is None  # sent as null: no target any more
     assert view["action"] == "stop"

@@ -128,6 +128,7 @@ class Viewer:
             for key, name in PROGRESS_FIELDS.items():
                 if key in msg:
                     progress[name] = msg[key]
+            self.trail.extend(msg.get("trail") or ())  # a merged step: the ends of the steps before its last
             if self.view["pose"] is not None:
                 self.trail.append(self.view["pose"][:2])
             self.seq = msg["seq"]

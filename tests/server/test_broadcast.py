@@ -11,8 +11,8 @@ from server.broadcast import Broadcaster, Outgoing, Subscriber, merge_steps
 
 
 def step(seq: int, cells: list[list[int]]) -> dict[str, Any]:
-    pose = {"x": float(seq), "y": 0.0, "theta": 0.0}
-    return {"type": "step", "seq": seq, "step": seq, "cells": cells, "pose": pose, "progress": {"step": seq}}
+    """A step as the run sends it (docs/protocol.md): pose in mm and mrad."""
+    return {"type": "step", "seq": seq, "cells": cells, "pose": [100 * seq, 0, 0], "t_s": float(seq)}
 
 
 def status(event: str, seq: int) -> dict[str, Any]:
@@ -32,7 +32,8 @@ def drain(sub: Subscriber) -> list[dict[str, Any]]:
 
 def test_merging_keeps_the_latest_state_of_each_cell_in_order() -> None:
     merged = merge_steps([step(5, [[1, 1, 0], [2, 2, 1]]), step(6, [[1, 1, 1]]), step(7, [[3, 3, 2]])])
-    assert merged["seq"] == 7 and merged["merged"] == 3 and merged["pose"]["x"] == 7.0
+    assert merged["seq"] == 7 and merged["merged"] == 3 and merged["pose"] == [700, 0, 0]
+    assert merged["trail"] == [[500, 0], [600, 0]]
     assert merged["cells"] == [[2, 2, 1], [1, 1, 1], [3, 3, 2]]
     again = merge_steps([merged, step(8, [[2, 2, 0]])])
     assert again["merged"] == 4 and again["seq"] == 8
@@ -127,6 +128,7 @@ def test_a_merged_step_carries_the_latest_value_of_every_field_that_any_merged_s
         "action": "explore",
         "metrics": {"f1": 0.5},
         "target": None,
+        "trail": [[100, 0], [300, 0]],  # where steps 5 and 6 ended; step 7 ends at ``pose``
         "cells": [[1, 1, 0]],
         "merged": 3,
     }
@@ -154,3 +156,16 @@ def test_only_viewers_that_ask_for_timing_get_the_wall_time() -> None:
     merged = sub.fold(sub.items.popleft())
     assert json.loads(merged.wire(timing=True))["wall_time"] == 1795312345.5  # the last merged step's
     assert "wall_time" not in merged.wire()
+
+
+def test_a_merged_step_keeps_every_position_the_robot_ended_a_step_at() -> None:
+    still = {"type": "step", "seq": 1, "t_s": 1.0}  # no pose: the robot did not move (or has none yet)
+    a = {"type": "step", "seq": 2, "pose": [100, 0, 0]}
+    b = {"type": "step", "seq": 3, "t_s": 2.0}
+    c = {"type": "step", "seq": 4, "pose": [300, 0, 0]}
+    first = merge_steps([still, a, b])
+    assert first["trail"] == [[100, 0]] and first["pose"] == [100, 0, 0]  # b ended where a did: at pose
+    # Merging a merged step again keeps its trail, oldest first.
+    again = merge_steps([first, c, {"type": "step", "seq": 5, "pose": [500, 0, 0]}])
+    assert again["trail"] == [[100, 0], [100, 0], [300, 0]] and again["merged"] == 5
+    assert "trail" not in merge_steps([still, {"type": "step", "seq": 2, "t_s": 2.0}])

@@ -11,6 +11,7 @@ import httpx
 import numpy as np
 from live_client import GREY, Viewer, csv_codes, decode_cells, run_async, wait_ended, watch
 from live_server import LiveServer
+from numpy.typing import NDArray
 from websockets.asyncio.client import connect
 
 FAST = {"world": "room2", "speed": "max", "max_steps": 60}
@@ -124,6 +125,14 @@ def test_several_viewers_all_rebuild_the_same_map(server: LiveServer, api: httpx
     assert len(sessions) == 1
 
 
+def dedup(points: list[list[int]]) -> NDArray[np.int64]:
+    """A trail without repeated consecutive points (a step that did not move the robot adds one)."""
+    a = np.asarray(points, dtype=np.int64).reshape(-1, 2)
+    keep = np.ones(len(a), dtype=bool)
+    keep[1:] = np.abs(np.diff(a, axis=0)).max(axis=1) > 1  # within a millimetre's rounding: the same
+    return a[keep]
+
+
 def test_merged_steps_and_viewers_that_join_or_resync_late_all_end_with_the_final_state(
     make_server: Any,
 ) -> None:
@@ -164,6 +173,9 @@ def test_merged_steps_and_viewers_that_join_or_resync_late_all_end_with_the_fina
             assert viewer.view["action"] == after.view["action"] is not None
             assert np.abs(np.array(viewer.view["pose"]) - after.view["pose"]).max() <= 1
             assert viewer.view["sweep"] == after.view["sweep"]
+            # Merged steps carry the positions they skipped: the drawn path is the run's whole path.
+            ours, theirs = dedup(viewer.trail), dedup(after.last_snapshot["trail"])
+            assert ours.shape == theirs.shape and np.abs(ours - theirs).max() <= 1
 
 
 def test_steps_carry_only_what_changed_and_timing_only_on_request(make_server: Any) -> None:

@@ -52,6 +52,10 @@ export function applyStep(view, msg) {
   if ('explored' in msg) progress.explored = msg.explored;
   if ('frontier' in msg) progress.frontier = msg.frontier;
   view.progress = progress;
+  if (Array.isArray(msg.trail)) {
+    // A merged step: where the robot ended each of the steps it stands for, before the last.
+    for (const point of msg.trail.map(pointOf)) if (point) view.trail.push(point);
+  }
   if (view.pose) view.trail.push([view.pose.x, view.pose.y]);
   return view;
 }
