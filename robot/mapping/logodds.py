@@ -125,6 +125,7 @@ class LogOddsMapper:
         self._recent: NDArray[np.float64] | None = None
         self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
+        self._logodds_cache: NDArray[np.float32] | None = None
         self._fine_cache: NDArray[np.int8] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         self._outside = blocked_by_extent(frame)
@@ -233,8 +234,7 @@ class LogOddsMapper:
         """
         arcs = self._arcs
         p = self.params
-        self._occ_cache = None
-        self._fine_cache = None
+        self._changed()
         if not arcs.n_arcs:
             return
         if full or self._support is None or self._sweeps_since_full >= p.reattribute_every:
@@ -244,7 +244,13 @@ class LogOddsMapper:
             self._recent = self._support
         elif arcs.n_arcs > self._support_arcs:
             self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
-        self._occ_cache = None
+        self._changed()
+
+    def _changed(self, occupied: bool = True) -> None:
+        """The evidence changed: drop what was derived from it (the occupied share too if ``occupied``)."""
+        if occupied:
+            self._occ_cache = None
+        self._logodds_cache = None
         self._fine_cache = None
 
     def occupied_evidence(self) -> NDArray[np.float32]:
@@ -262,7 +268,13 @@ class LogOddsMapper:
 
     @property
     def logodds(self) -> NDArray[np.float32]:
-        return self.free_evidence + self.occupied_evidence()
+        """Free plus occupied evidence, read-only; computed once between changes (the engine reads it
+        for the box fix and again for occlusion in the same sweep)."""
+        if self._logodds_cache is None:
+            L = self.free_evidence + self.occupied_evidence()
+            L.flags.writeable = False
+            self._logodds_cache = L
+        return self._logodds_cache
 
     def _occluded(self, cells: ConeCells, L: NDArray[np.float32], free_to: float) -> NDArray[np.bool_]:
         """Cone cells at or behind a cell already believed occupied.
@@ -299,15 +311,14 @@ class LogOddsMapper:
         rows, cols = self._disk(pose.x, pose.y, self.robot.radius_m)
         F = self.free_evidence
         F[rows, cols] = np.maximum(F[rows, cols] + self.params.l_body, self.params.free_clamp)
-        self._fine_cache = None
+        self._changed(occupied=False)
 
     def mark_contact(self, pose: Pose, direction_rad: float) -> None:
         d = self.robot.radius_m + 0.5 * self.fine.resolution
         r, c = self.fine.world_to_index(pose.x + d * math.cos(direction_rad), pose.y + d * math.sin(direction_rad))
         if self.fine.contains_index(r, c):
             self.contact_evidence[int(r), int(c)] += self.params.l_contact
-            self._occ_cache = None
-            self._fine_cache = None
+            self._changed()
 
     def evidence(self) -> Evidence | None:
         return Evidence(self.fine, self.logodds)
