@@ -70,6 +70,19 @@ def emulate_hcsr04(factory, trigger: int, echo: int, range_m: float):
 
 
 @pytest.fixture
+def no_pin_factory(monkeypatch):
+    """gpiozero with no pin factory to use or fall back on, as on a machine that is not a Pi."""
+    try:
+        import lgpio  # noqa: F401
+
+        pytest.skip("a real pin factory is available here")
+    except ImportError:
+        pass
+    monkeypatch.delenv("GPIOZERO_PIN_FACTORY", raising=False)
+    monkeypatch.setattr(Device, "pin_factory", None)
+
+
+@pytest.fixture
 def hcsr04():
     """hcsr04(factory, trigger, echo, range_m) wires one emulated sensor."""
     return emulate_hcsr04

@@ -94,18 +94,7 @@ def test_a_missing_imu_fails_cleanly_and_releases_the_pins(mock_factory, sonar_p
     Motor(12, 13).close()  # nothing still holds the motor pins
 
 
-def test_no_gpio_library_is_a_hardware_error(monkeypatch, fake_mpu, bus_factory, pi_setup):
-    pytest.importorskip("gpiozero")
-    try:
-        import lgpio  # noqa: F401
-
-        pytest.skip("a real pin factory is available here")
-    except ImportError:
-        pass
-    from gpiozero import Device
-
-    monkeypatch.delenv("GPIOZERO_PIN_FACTORY", raising=False)
-    monkeypatch.setattr(Device, "pin_factory", None)
+def test_no_gpio_library_is_a_hardware_error(no_pin_factory, fake_mpu, bus_factory, pi_setup):
     with pytest.warns(Warning), pytest.raises(HardwareError, match=r"no GPIO pin factory .* install lgpio"):
         PiHardware.from_config(pi_setup, bus_factory=bus_factory, sleep=lambda s: None)
 

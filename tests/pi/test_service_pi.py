@@ -279,16 +279,28 @@ def test_an_imu_that_is_not_an_mpu6050_ends_the_run_as_error(
     assert api.post(f"/api/runs/{again['id']}/stop").json()["status"] == "stopped"
 
 
-def test_the_watchdog_stops_the_wheels_while_the_run_thread_is_stuck(
-    service: PiService, motor_states: Any, eventually: Any
-) -> None:
+def stall_while_driving(service: PiService, eventually: Any) -> str:
+    """Start a run and hold its thread inside a hardware call while the wheels are driven; the caller
+    lets it go with ``service.robot.release.set()``."""
     api, robot = service.api, service.robot
-    run_id = start_run(api, max_steps=5000)["id"]
+    run_id = str(start_run(api, max_steps=5000)["id"])
     assert eventually(robot.driven, TIMEOUT_S), "the wheels were never commanded"
     robot.stall.set()
     try:
         assert robot.stalled.wait(TIMEOUT_S), "the run never stalled"
         assert robot.stalled_command is not None and robot.stalled_command != (0.0, 0.0)  # stuck while driving
+    except BaseException:
+        robot.release.set()  # never leave the run thread stuck
+        raise
+    return run_id
+
+
+def test_the_watchdog_stops_the_wheels_while_the_run_thread_is_stuck(
+    service: PiService, motor_states: Any, eventually: Any
+) -> None:
+    api, robot = service.api, service.robot
+    run_id = stall_while_driving(service, eventually)
+    try:
         commands = robot.bridges[-1].commands  # the wheel commands seen on the pins, appended at every change
         seen = len(commands)
 
@@ -308,18 +320,9 @@ def test_the_watchdog_stops_the_wheels_while_the_run_thread_is_stuck(
 
 
 @pytest.mark.filterwarnings("ignore::gpiozero.exc.PinFactoryFallback")  # gpiozero trying each library in turn
-def test_without_a_gpio_pin_factory_the_run_ends_as_error(start_service: Any, monkeypatch: Any) -> None:
+@pytest.mark.usefixtures("no_pin_factory")
+def test_without_a_gpio_pin_factory_the_run_ends_as_error(start_service: Any) -> None:
     """The shipped config/robot-pi.toml through the real ``open_pi``, on a machine that is not a Pi."""
-    try:
-        import lgpio  # noqa: F401
-
-        pytest.skip("a real pin factory is available here")
-    except ImportError:
-        pass
-    from gpiozero import Device
-
-    monkeypatch.delenv("GPIOZERO_PIN_FACTORY", raising=False)
-    monkeypatch.setattr(Device, "pin_factory", None)
     _live, api = start_service(None)
     run_id = start_run(api)["id"]
     run = wait_ended(api, run_id)
@@ -332,14 +335,10 @@ def test_a_stop_in_the_middle_of_a_move_halts_the_wheels_at_once_and_ends_as_sto
     service: PiService, motor_states: Any, eventually: Any
 ) -> None:
     api, robot = service.api, service.robot
-    run_id = start_run(api, max_steps=5000)["id"]
-    assert eventually(robot.driven, TIMEOUT_S), "the wheels were never commanded"
-    robot.stall.set()
+    run_id = stall_while_driving(service, eventually)
     answers: list[httpx.Response] = []
     stopper = threading.Thread(target=lambda: answers.append(api.post(f"/api/runs/{run_id}/stop")))
     try:
-        assert robot.stalled.wait(TIMEOUT_S), "the run never stalled"
-        assert robot.stalled_command is not None and robot.stalled_command != (0.0, 0.0)  # stuck while driving
         stopper.start()
         # The stop itself halts the motors, while the step is still under way (not the watchdog).
         assert eventually(lambda: robot.hw.halted == "run stopped", TIMEOUT_S), robot.hw.halted
