@@ -197,13 +197,18 @@ def test_an_exact_robot_maps_a_small_room_and_says_why_it_stopped() -> None:
     assert result.final_xy_error_m < 0.02
 
 
-def test_step_deltas_rebuild_the_exported_map() -> None:
-    world = small_world()
-    cfg = load_run_config()
+def small_engine(world, seed: int) -> SlamEngine:
+    """The default engine on a simulated ``world`` with the default noise."""
     from robot.sim import SimRobot
 
-    sim = SimRobot(world, cfg.robot, SimNoise(), seed=4)
-    engine = SlamEngine(sim, cfg.robot, cfg.slam, frame_for_world(world, 0.2))
+    cfg = load_run_config()
+    sim = SimRobot(world, cfg.robot, SimNoise(), seed=seed)
+    return SlamEngine(sim, cfg.robot, cfg.slam, frame_for_world(world, 0.2))
+
+
+def test_step_deltas_rebuild_the_exported_map() -> None:
+    world = small_world()
+    engine = small_engine(world, seed=4)
     rebuilt = np.full(engine.map_states().shape, UNKNOWN, dtype=np.int8)
     steps = 0
     while not engine.done:
@@ -217,12 +222,7 @@ def test_step_deltas_rebuild_the_exported_map() -> None:
 
 
 def test_stopping_early_keeps_the_partial_map() -> None:
-    world = small_world()
-    cfg = load_run_config()
-    from robot.sim import SimRobot
-
-    sim = SimRobot(world, cfg.robot, SimNoise(), seed=1)
-    engine = SlamEngine(sim, cfg.robot, cfg.slam, frame_for_world(world, 0.2))
+    engine = small_engine(small_world(), seed=1)
     rebuilt = np.full(engine.map_states().shape, UNKNOWN, dtype=np.int8)
     for _ in range(5):
         step = engine.step()
