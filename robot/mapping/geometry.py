@@ -56,50 +56,99 @@ def place_beams(pose: Pose, ranges_m: NDArray[np.float64], robot: RobotConfig) -
     return beams
 
 
-def cone_cells(grid: GridSpec, beam: Beam, half_angle_rad: float, reach_m: float, aperture_m: float = 0.0) -> ConeCells:
-    """Cells of ``grid`` whose centres are within ``reach_m`` of the transducer and inside the beam.
+@dataclass(frozen=True)
+class Cones:
+    """The cells of several beams' cones at once, beam after beam; ``starts[i]:starts[i + 1]`` are beam i's."""
 
-    The beam is a cone of half-angle ``half_angle_rad`` that starts ``aperture_m`` wide at the
-    transducer (a real transducer is a couple of centimetres across, so the beam near it is not a
-    point). ``off_axis_rad`` is the angle from the nearest edge of that aperture.
-    """
-    res = grid.resolution
-    reach = max(reach_m, 0.0)
-    half_ap = aperture_m / 2.0
+    cells: ConeCells
+    starts: NDArray[np.int64]  # one more than there are beams
+
+    def of(self, i: int) -> slice:
+        return slice(int(self.starts[i]), int(self.starts[i + 1]))
+
+
+def _bounds(
+    grid: GridSpec, beam: Beam, half_angle_rad: float, reach: float, half_ap: float
+) -> tuple[int, int, int, int]:
+    """Column and bottom-up row span of the cells that can hold ``beam``'s cone (empty if c1 < c0)."""
     c, s = math.cos(beam.axis_rad), math.sin(beam.axis_rad)
-    # Bounding box of the beam: the aperture ends and the sector's corners and extremes.
-    angles = beam.axis_rad + np.array([-half_angle_rad, 0.0, half_angle_rad])
     px, py = -s * half_ap, c * half_ap
-    xs = [beam.x + px, beam.x - px, *(beam.x + reach * np.cos(angles) + px), *(beam.x + reach * np.cos(angles) - px)]
-    ys = [beam.y + py, beam.y - py, *(beam.y + reach * np.sin(angles) + py), *(beam.y + reach * np.sin(angles) - py)]
-    for q in np.arange(-2, 3) * (math.pi / 2):
+    xs = [beam.x + px, beam.x - px]
+    ys = [beam.y + py, beam.y - py]
+    for a in (beam.axis_rad - half_angle_rad, beam.axis_rad, beam.axis_rad + half_angle_rad):
+        ex, ey = beam.x + reach * math.cos(a), beam.y + reach * math.sin(a)
+        xs += [ex + px, ex - px]
+        ys += [ey + py, ey - py]
+    for k in range(-2, 3):  # the sector's extremes along x and y, where they lie inside it
+        q = k * (math.pi / 2)
         if abs(math.remainder(q - beam.axis_rad, 2 * math.pi)) <= half_angle_rad:
-            xs.append(beam.x + reach * math.cos(q) + abs(px))
-            xs.append(beam.x + reach * math.cos(q) - abs(px))
-            ys.append(beam.y + reach * math.sin(q) + abs(py))
-            ys.append(beam.y + reach * math.sin(q) - abs(py))
+            ex, ey = beam.x + reach * math.cos(q), beam.y + reach * math.sin(q)
+            xs += [ex + abs(px), ex - abs(px)]
+            ys += [ey + abs(py), ey - abs(py)]
+    res = grid.resolution
     c0 = max(math.floor((min(xs) - grid.origin_x) / res), 0)
     c1 = min(math.floor((max(xs) - grid.origin_x) / res), grid.cols - 1)
     iy0 = max(math.floor((min(ys) - grid.origin_y) / res), 0)
     iy1 = min(math.floor((max(ys) - grid.origin_y) / res), grid.rows - 1)
-    if c1 < c0 or iy1 < iy0:
-        empty_i = np.zeros(0, dtype=np.int64)
-        empty_f = np.zeros(0)
-        return ConeCells(empty_i, empty_i, empty_f, empty_f, empty_f)
-    dx = (grid.origin_x + (np.arange(c0, c1 + 1) + 0.5) * res - beam.x)[None, :]
-    dy = (grid.origin_y + (np.arange(iy0, iy1 + 1) + 0.5) * res - beam.y)[:, None]
+    return c0, c1, iy0, iy1
+
+
+def cones(
+    grid: GridSpec, beams: list[Beam], half_angle_rad: float, reaches_m: list[float], aperture_m: float = 0.0
+) -> Cones:
+    """Cells of ``grid`` whose centres are within each beam's reach of its transducer and inside its beam.
+
+    A beam is a cone of half-angle ``half_angle_rad`` that starts ``aperture_m`` wide at the
+    transducer (a real transducer is a couple of centimetres across, so the beam near it is not a
+    point). ``off_axis_rad`` is the angle from the nearest edge of that aperture. All beams are
+    computed in one pass over their bounding boxes, laid end to end.
+    """
+    res = grid.resolution
+    half_ap = aperture_m / 2.0
+    n = len(beams)
+    spans = np.zeros((n, 4), dtype=np.int64)  # c0, width, iy0, height
+    params = np.zeros((n, 5))  # x, y, cos, sin, reach
+    for i, (beam, reach) in enumerate(zip(beams, reaches_m, strict=True)):
+        reach = max(reach, 0.0)
+        if reach > 0.0:
+            c0, c1, iy0, iy1 = _bounds(grid, beam, half_angle_rad, reach, half_ap)
+            if c1 >= c0 and iy1 >= iy0:
+                spans[i] = (c0, c1 - c0 + 1, iy0, iy1 - iy0 + 1)
+        params[i] = (beam.x, beam.y, math.cos(beam.axis_rad), math.sin(beam.axis_rad), reach)
+    sizes = spans[:, 1] * spans[:, 3]
+    box_starts = np.concatenate(([0], np.cumsum(sizes)))
+    owner = np.repeat(np.arange(n), sizes)
+    local = np.arange(int(box_starts[-1]), dtype=np.float64) - np.repeat(box_starts[:-1].astype(np.float64), sizes)
+    width = np.repeat(spans[:, 1].astype(np.float64), sizes)
+    row = np.floor((local + 0.5) / width)  # exact: small whole numbers
+    # Cell centres relative to each transducer.
+    dx = np.repeat(grid.origin_x + (spans[:, 0] + 0.5) * res - params[:, 0], sizes) + (local - row * width) * res
+    dy = np.repeat(grid.origin_y + (spans[:, 2] + 0.5) * res - params[:, 1], sizes) + row * res
+    c = np.repeat(params[:, 2], sizes)
+    s = np.repeat(params[:, 3], sizes)
     along = dx * c + dy * s
     lateral = dy * c - dx * s
     spread = np.maximum(np.abs(lateral) - half_ap, 0.0)
-    dist = np.hypot(dx, dy)
     inset = along * math.tan(half_angle_rad) - spread
-    inside = (along > 0) & (dist <= reach) & (inset >= 0)
-    iy, ix = np.nonzero(inside)
-    off = np.arctan2(spread[iy, ix], along[iy, ix]) * np.sign(lateral[iy, ix])
-    return ConeCells(
-        rows=(grid.rows - 1 - (iy + iy0)).astype(np.int64),
-        cols=(ix + c0).astype(np.int64),
-        dist_m=dist[iy, ix],
+    reach_b = np.repeat(params[:, 4], sizes)
+    inside = np.flatnonzero((along > 0) & (dx * dx + dy * dy <= reach_b * reach_b) & (inset >= 0))
+    dist = np.hypot(dx[inside], dy[inside])
+    keep = dist <= reach_b[inside]  # the squared test above can round the other way at the very edge
+    inside, dist = inside[keep], dist[keep]
+    off = np.arctan2(spread[inside], along[inside]) * np.sign(lateral[inside])
+    ix = np.repeat(spans[:, 0], sizes)[inside] + (local[inside] - row[inside] * width[inside]).astype(np.int64)
+    iy = np.repeat(spans[:, 2], sizes)[inside] + row[inside].astype(np.int64)
+    cells = ConeCells(
+        rows=(grid.rows - 1 - iy).astype(np.int64),
+        cols=ix,
+        dist_m=dist,
         off_axis_rad=off,
-        inset_m=inset[iy, ix],
+        inset_m=inset[inside],
     )
+    starts = np.searchsorted(owner[inside], np.arange(n + 1)).astype(np.int64)
+    return Cones(cells, starts)
+
+
+def cone_cells(grid: GridSpec, beam: Beam, half_angle_rad: float, reach_m: float, aperture_m: float = 0.0) -> ConeCells:
+    """One beam's cone: see :func:`cones`."""
+    return cones(grid, [beam], half_angle_rad, [reach_m], aperture_m).cells

@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
-from robot.mapping.geometry import ConeCells, cone_cells, place_beams
+from robot.mapping.geometry import Cones, cones, place_beams
 from robot.world import Pose
 
 
@@ -122,7 +122,8 @@ class LogOddsMapper:
         self._arcs = _ArcStore()
         self._support: NDArray[np.float64] | None = None  # shares from the last full re-sharing
         self._support_arcs = 0  # arcs covered by it
-        self._recent: NDArray[np.float64] | None = None
+        self._recent: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # echoes since: cells, evidence
+        self._occ_base: NDArray[np.float32] | None = None  # bumps plus the last full sharing
         self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
         self._logodds_cache: NDArray[np.float32] | None = None
@@ -150,80 +151,88 @@ class LogOddsMapper:
         F = self.free_evidence
         half = self._half
         L = self.logodds  # the belief before this sweep, for occlusion
-        cols_n = self.fine.cols
-        for beam in place_beams(pose, ranges_m, self.robot):
+        res = self.fine.resolution
+        beams = place_beams(pose, ranges_m, self.robot)
+        free_to, reach, mapped = [], [], []
+        for beam in beams:
             r = beam.range_m
-            mapped_echo = beam.echo and r <= p.max_echo_range_m
-            if mapped_echo:
-                free_to = r - p.free_margin_m - p.free_margin_frac * r
-                reach = r + (p.hit_depth_cells + 0.5) * self.fine.resolution
+            if beam.echo and r <= p.max_echo_range_m:
+                free_to.append(r - p.free_margin_m - p.free_margin_frac * r)
+                reach.append(r + (p.hit_depth_cells + 0.5) * res)
             elif beam.echo:
                 # A far echo still clears the cone before it (the free weight fades out with range),
                 # but its arc is too wide and too noisy to place a surface.
-                free_to = min(r - p.free_margin_m - p.free_margin_frac * r, p.carve_max_m)
-                reach = free_to
+                free_to.append(min(r - p.free_margin_m - p.free_margin_frac * r, p.carve_max_m))
+                reach.append(free_to[-1])
             else:
-                free_to = min(p.no_echo_carve_m, r)
-                reach = free_to
-            cells = cone_cells(self.fine, beam, half, reach, p.aperture_m)
-            if cells.rows.size == 0:
+                free_to.append(min(p.no_echo_carve_m, r))
+                reach.append(free_to[-1])
+            mapped.append(beam.echo and r <= p.max_echo_range_m)
+        found = cones(self.fine, beams, half, reach, p.aperture_m)
+        cells = found.cells
+        sizes = np.diff(found.starts)
+        ang = (cells.off_axis_rad / half) ** 2
+        # Clear only cells lying wholly inside the beam: a cell whose centre is inside but whose
+        # corner pokes out may hold a chair leg the echo never saw.
+        limit = np.repeat(np.asarray(free_to), sizes)
+        free = (cells.dist_m < limit) & (cells.inset_m >= p.free_inset_cells * res)
+        self._clear_occluded(found, L, limit, free)
+        if np.any(free):
+            d = cells.dist_m[free]
+            fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
+            w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
+            echo_weight = np.repeat([1.0 if beam.echo else p.no_echo_weight for beam in beams], sizes)
+            rows, cols = cells.rows[free], cells.cols[free]
+            np.add.at(F, (rows, cols), p.l_free * w * echo_weight[free])
+            F[rows, cols] = np.maximum(F[rows, cols], p.free_clamp)
+        # The surface is at r; the occupied cell is the one just behind it.
+        depth = p.hit_depth_cells * res
+        cols_n = self.fine.cols
+        span = max(p.max_echo_range_m - p.occ_full_m, 1e-9)
+        for i, beam in enumerate(beams):
+            if not mapped[i] or sizes[i] == 0:
                 continue
-            ang = (cells.off_axis_rad / half) ** 2
-            # Clear only cells lying wholly inside the beam: a cell whose centre is inside but whose
-            # corner pokes out may hold a chair leg the echo never saw.
-            inset = p.free_inset_cells * self.fine.resolution
-            free = (cells.dist_m < free_to) & (cells.inset_m >= inset) & ~self._occluded(cells, L, free_to)
-            if np.any(free):
-                d = cells.dist_m[free]
-                fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
-                w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
-                if not beam.echo:
-                    w = w * p.no_echo_weight
-                np.add.at(F, (cells.rows[free], cells.cols[free]), p.l_free * w)
-            if not mapped_echo:
-                continue
-            # The surface is at r; the occupied cell is the one just behind it.
-            depth = p.hit_depth_cells * self.fine.resolution
-            half_f = 0.5 * self.fine.resolution
-            arc = (cells.dist_m >= r + depth - half_f) & (cells.dist_m < r + depth + half_f)
-            rows, cols = cells.rows[arc], cells.cols[arc]
-            prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[arc]
-            ax = beam.x + (r + depth) * math.cos(beam.axis_rad)
-            ay = beam.y + (r + depth) * math.sin(beam.axis_rad)
-            ar, ac = self.fine.world_to_index(ax, ay)
+            r = beam.range_m
+            own = found.of(i)
+            dist = cells.dist_m[own]
+            arc = (dist >= r + depth - 0.5 * res) & (dist < r + depth + 0.5 * res)
+            index = cells.rows[own][arc] * cols_n + cells.cols[own][arc]
+            prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[own][arc]
+            ar, ac = self.fine.world_to_index(
+                beam.x + (r + depth) * math.cos(beam.axis_rad), beam.y + (r + depth) * math.sin(beam.axis_rad)
+            )
             if self.fine.contains_index(ar, ac):
-                rows = np.append(rows, int(ar))
-                cols = np.append(cols, int(ac))
+                index = np.append(index, int(ar) * cols_n + int(ac))
                 prior = np.append(prior, 1.0)
-            if rows.size == 0:
-                continue
-            span = max(p.max_echo_range_m - p.occ_full_m, 1e-9)
-            near = float(np.clip((p.max_echo_range_m - r) / span, 0.0, 1.0))
-            self._arcs.add(rows * cols_n + cols, prior, p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
-        np.maximum(F, p.free_clamp, out=F)
+            if index.size:
+                near = min(max((p.max_echo_range_m - r) / span, 0.0), 1.0)
+                self._arcs.add(index, prior, p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
         self._sweeps_since_full += 1
         self._update_support(full=False)
 
-    def _attribute(self, first_arc: int, support: NDArray[np.float64], rounds: int) -> NDArray[np.float64]:
-        """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support``."""
+    def _attribute(
+        self, first_arc: int, support: NDArray[np.float64] | None, rounds: int
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support`` (none: zero).
+
+        Returns the cells the arcs touch and the evidence they get, worked out on those cells alone."""
         arcs = self._arcs
         lo = int(arcs.starts[first_arc])
         hi = arcs.n_cells
-        cells = arcs.cells[lo:hi]
+        touched, slot = np.unique(arcs.cells[lo:hi], return_inverse=True)
         starts = arcs.starts[first_arc : arcs.n_arcs] - lo
         sizes = np.diff(np.append(starts, hi - lo))
         strength = self.params.l_occ * np.repeat(arcs.strength[first_arc : arcs.n_arcs], sizes)
-        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * self.free_evidence.ravel()[cells])
-        own = np.zeros_like(support)
+        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * self.free_evidence.ravel()[touched][slot])
+        before = support[touched] if support is not None else np.zeros(touched.size)
+        own: NDArray[np.float64] = np.zeros(touched.size)
         for _ in range(rounds + 1):
-            w = base * np.exp(
-                self.params.explain_gain * np.minimum(support[cells] + own[cells], self.params.explain_cap)
-            )
+            w = base * np.exp(self.params.explain_gain * np.minimum(before[slot] + own[slot], self.params.explain_cap))
             wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
-            own = np.bincount(cells, weights=strength * w / np.maximum(wmax, 1e-12), minlength=support.size).astype(
-                np.float64
+            own = np.bincount(slot, weights=strength * w / np.maximum(wmax, 1e-12), minlength=touched.size).astype(
+                np.float64, copy=False
             )
-        return support + own
+        return touched, own
 
     def _update_support(self, full: bool) -> None:
         """Share the echoes' evidence: all of them every ``reattribute_every`` sweeps (or when
@@ -238,10 +247,13 @@ class LogOddsMapper:
         if not arcs.n_arcs:
             return
         if full or self._support is None or self._sweeps_since_full >= p.reattribute_every:
-            self._support = self._attribute(0, np.zeros(self.fine.rows * self.fine.cols), p.explain_rounds)
+            touched, own = self._attribute(0, None, p.explain_rounds)
+            self._support = np.zeros(self.fine.rows * self.fine.cols)
+            self._support[touched] = own
             self._support_arcs = arcs.n_arcs
             self._sweeps_since_full = 0
-            self._recent = self._support
+            self._recent = (np.zeros(0, dtype=np.int64), np.zeros(0))
+            self._occ_base = None
         elif arcs.n_arcs > self._support_arcs:
             self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
         self._changed()
@@ -260,9 +272,17 @@ class LogOddsMapper:
         other echoes already put a surface in take the larger share.
         """
         if self._occ_cache is None:
-            occ = self.contact_evidence.copy()
-            if self._recent is not None:
-                occ += self._recent.reshape(occ.shape).astype(np.float32)
+            if self._occ_base is None:  # bumps and the last full sharing
+                self._occ_base = self.contact_evidence.copy()
+                if self._support is not None:
+                    self._occ_base += self._support.reshape(self._occ_base.shape).astype(np.float32)
+            occ = self._occ_base.copy()
+            if self._recent is not None and self._support is not None:  # the echoes since, on their cells
+                touched, own = self._recent
+                flat = occ.reshape(-1)
+                flat[touched] = self.contact_evidence.reshape(-1)[touched] + (self._support[touched] + own).astype(
+                    np.float32
+                )
             self._occ_cache = occ
         return self._occ_cache
 
@@ -276,23 +296,29 @@ class LogOddsMapper:
             self._logodds_cache = L
         return self._logodds_cache
 
-    def _occluded(self, cells: ConeCells, L: NDArray[np.float32], free_to: float) -> NDArray[np.bool_]:
-        """Cone cells at or behind a cell already believed occupied.
+    def _clear_occluded(
+        self, found: Cones, L: NDArray[np.float32], limit: NDArray[np.float64], free: NDArray[np.bool_]
+    ) -> None:
+        """Unmark in ``free`` the cone cells at or behind a cell already believed occupied.
 
         A sonar cannot see through a solid object, so a reading that runs past a known obstacle in
         its cone (it missed it at a glancing angle, or the obstacle is off to the side) says nothing
         about the space behind it.
         """
-        occ = (L[cells.rows, cells.cols] >= self.params.occ_threshold) & (cells.dist_m < free_to)
+        cells = found.cells
+        occ = (L[cells.rows, cells.cols] >= self.params.occ_threshold) & (cells.dist_m < limit)
         if not np.any(occ):
-            return occ
-        occ_d = cells.dist_m[occ]
-        occ_a = cells.off_axis_rad[occ]
-        half_width = np.arctan2(0.75 * self.fine.resolution, occ_d)  # angular half-size of a cell
-        behind = (cells.dist_m[:, None] >= occ_d[None, :] - 1e-9) & (
-            np.abs(cells.off_axis_rad[:, None] - occ_a[None, :]) <= half_width[None, :]
-        )
-        return np.any(behind, axis=1)
+            return
+        for i in np.unique(np.searchsorted(found.starts, np.flatnonzero(occ), side="right") - 1):
+            own = found.of(int(i))
+            dist, off = cells.dist_m[own], cells.off_axis_rad[own]
+            hit = occ[own]
+            occ_d, occ_a = dist[hit], off[hit]
+            half_width = np.arctan2(0.75 * self.fine.resolution, occ_d)  # angular half-size of a cell
+            behind = (dist[:, None] >= occ_d[None, :] - 1e-9) & (
+                np.abs(off[:, None] - occ_a[None, :]) <= half_width[None, :]
+            )
+            free[own] &= ~np.any(behind, axis=1)
 
     def _disk(self, x: float, y: float, radius: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         f = self.fine
@@ -318,6 +344,7 @@ class LogOddsMapper:
         r, c = self.fine.world_to_index(pose.x + d * math.cos(direction_rad), pose.y + d * math.sin(direction_rad))
         if self.fine.contains_index(r, c):
             self.contact_evidence[int(r), int(c)] += self.params.l_contact
+            self._occ_base = None
             self._changed()
 
     def evidence(self) -> Evidence | None:
