@@ -101,7 +101,7 @@ class SimRobot:
         ws = np.concatenate(self._imu_w)
         self._imu_t.clear()
         self._imu_w.clear()
-        return [ImuSample(float(t), float(w)) for t, w in zip(ts, ws, strict=True)]
+        return [ImuSample(t, w) for t, w in zip(ts.tolist(), ws.tolist(), strict=True)]
 
     def read_sonar_sweep(self) -> SonarSweep:
         n = len(self.robot.sonars)
@@ -161,48 +161,42 @@ class SimRobot:
         wl, wr = self._cmd[0] / self.robot.wheel_radius_m, self._cmd[1] / self.robot.wheel_radius_m  # [rad/s]
         # One batch of random numbers per call: slip for both wheels, gyro bias walk, gyro noise.
         draws = rng.standard_normal((ticks, 4))
-        rate = [0.0] * ticks
+        rate = np.zeros(ticks)
         if wl != 0.0 or wr != 0.0:
             rl, rr = float(self._radius_true[0]), float(self._radius_true[1])
-            base = self.robot.wheel_base_m
             slip = noise.wheel_slip_std
-            x, y, th = self._x, self._y, self._theta
-            xs, ys, ths, dss = [], [], [], []
-            for k in range(ticks):
-                gl = wl * dt * rl * (1.0 + slip * draws[k, 0])  # ground travel of each wheel [m]
-                gr = wr * dt * rr * (1.0 + slip * draws[k, 1])
-                ds = 0.5 * (gl + gr)
-                dth = (gr - gl) / base
-                mid = th + 0.5 * dth
-                x += ds * math.cos(mid)
-                y += ds * math.sin(mid)
-                th += dth
-                xs.append(x)
-                ys.append(y)
-                ths.append(th)
-                dss.append(abs(ds))
-                rate[k] = dth / dt
+            gl = wl * dt * rl * (1.0 + slip * draws[:, 0])  # ground travel of each wheel per tick [m]
+            gr = wr * dt * rr * (1.0 + slip * draws[:, 1])
+            ds = 0.5 * (gl + gr)
+            dth = (gr - gl) / self.robot.wheel_base_m
+            # Running sums from the current pose, tick after tick (cumsum adds in order, as a loop would).
+            ths = np.cumsum(np.concatenate(([self._theta], dth)))
+            mid = ths[:-1] + 0.5 * dth
+            xs = np.cumsum(np.concatenate(([self._x], ds * np.cos(mid))))[1:]
+            ys = np.cumsum(np.concatenate(([self._y], ds * np.sin(mid))))[1:]
+            ths = ths[1:]
+            rate = dth / dt
+            path = np.cumsum(np.abs(ds))
             ok = ticks
-            path_m = sum(dss)
-            if path_m > 0.0:
+            if path[-1] > 0.0:
                 # Every tick lies within the path length of the end point, so a clear end point with
                 # that much to spare rules out a collision without checking each tick.
-                end_clear = _point_segment_distance(np.array([x]), np.array([y]), self._segments)[0]
-                if end_clear < self.robot.radius_m + path_m:
-                    clearance = _point_segment_distance(np.array(xs), np.array(ys), self._segments)
+                end_clear = _point_segment_distance(xs[-1:], ys[-1:], self._segments)[0]
+                if end_clear < self.robot.radius_m + path[-1]:
+                    clearance = _point_segment_distance(xs, ys, self._segments)
                     hit = np.flatnonzero(clearance < self.robot.radius_m)
                     if hit.size:
                         ok = int(hit[0])  # the body stops at the last free tick; the wheels stall
                         self.collisions += ticks - ok
-                        rate[ok:] = [0.0] * (ticks - ok)
+                        rate[ok:] = 0.0
             if ok > 0:
-                self._x, self._y = xs[ok - 1], ys[ok - 1]
+                self._x, self._y = float(xs[ok - 1]), float(ys[ok - 1])
                 self._theta = math.atan2(math.sin(ths[ok - 1]), math.cos(ths[ok - 1]))
                 self._wheel_angle += np.array([wl, wr]) * dt * ok
-                self.odometer_m += float(sum(dss[:ok]))
+                self.odometer_m += float(path[ok - 1])
         # Gyro: true yaw rate + slowly wandering bias + white noise, one sample per tick.
         bias = self._gyro_bias + np.cumsum(noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * draws[:, 2])
         self._gyro_bias = float(bias[-1])
         self._imu_t.append(self._t + dt * np.arange(1, ticks + 1))
-        self._imu_w.append(np.asarray(rate) + bias + noise.gyro_noise_std_rad_s * draws[:, 3])
+        self._imu_w.append(rate + bias + noise.gyro_noise_std_rad_s * draws[:, 3])
         self._t += dt * ticks
