@@ -67,27 +67,42 @@ class LogOddsParams(BaseModel):
 
 
 class _ArcStore:
-    """Every echo's arc, flattened into growing arrays: fine-cell index and prior per cell, start
-    offset and strength per echo."""
+    """Every echo's arc, flattened into growing arrays: per arc cell its slot (a compact number for
+    each fine cell any arc has touched) and prior; per echo its start offset and strength."""
 
-    def __init__(self) -> None:
-        self.cells = np.zeros(4096, dtype=np.int64)
+    def __init__(self, n_cells: int) -> None:
+        self.slots = np.zeros(4096, dtype=np.int64)
         self.prior = np.zeros(4096)
         self.starts = np.zeros(512, dtype=np.int64)
         self.strength = np.zeros(512)
         self.n_cells = 0
         self.n_arcs = 0
+        self._slot_of = np.full(n_cells, -1, dtype=np.int64)  # fine cell -> slot
+        self._touched = np.zeros(1024, dtype=np.int64)  # slot -> fine cell
+        self.n_touched = 0
+
+    @property
+    def touched(self) -> NDArray[np.int64]:
+        """The fine cell of every slot."""
+        return self._touched[: self.n_touched]
 
     def add(self, cells: NDArray[np.int64], prior: NDArray[np.float64], strength: float) -> None:
+        new = np.unique(cells[self._slot_of[cells] < 0])
+        if new.size:
+            if self.n_touched + new.size > self._touched.size:
+                self._touched = np.resize(self._touched, max(2 * self._touched.size, self.n_touched + new.size))
+            self._slot_of[new] = np.arange(self.n_touched, self.n_touched + new.size)
+            self._touched[self.n_touched : self.n_touched + new.size] = new
+            self.n_touched += new.size
         n = cells.size
-        if self.n_cells + n > self.cells.size:
-            size = max(2 * self.cells.size, self.n_cells + n)
-            self.cells = np.resize(self.cells, size)
+        if self.n_cells + n > self.slots.size:
+            size = max(2 * self.slots.size, self.n_cells + n)
+            self.slots = np.resize(self.slots, size)
             self.prior = np.resize(self.prior, size)
         if self.n_arcs + 1 > self.starts.size:
             self.starts = np.resize(self.starts, 2 * self.starts.size)
             self.strength = np.resize(self.strength, 2 * self.strength.size)
-        self.cells[self.n_cells : self.n_cells + n] = cells
+        self.slots[self.n_cells : self.n_cells + n] = self._slot_of[cells]
         self.prior[self.n_cells : self.n_cells + n] = prior
         self.starts[self.n_arcs] = self.n_cells
         self.strength[self.n_arcs] = strength
@@ -119,10 +134,10 @@ class LogOddsMapper:
         self._inner = (slice(pad, pad + grid.rows * self.k), slice(pad, pad + grid.cols * self.k))
         self.free_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # <= 0
         self.contact_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # >= 0
-        self._arcs = _ArcStore()
-        self._support: NDArray[np.float64] | None = None  # shares from the last full re-sharing
+        self._arcs = _ArcStore(self.fine.rows * self.fine.cols)
+        self._support: NDArray[np.float64] | None = None  # per slot, from the last full re-sharing
         self._support_arcs = 0  # arcs covered by it
-        self._recent: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None  # echoes since: cells, evidence
+        self._recent: NDArray[np.float64] | None = None  # per slot, the echoes since
         self._occ_base: NDArray[np.float32] | None = None  # bumps plus the last full sharing
         self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
@@ -183,7 +198,7 @@ class LogOddsMapper:
             w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
             echo_weight = np.repeat([1.0 if beam.echo else p.no_echo_weight for beam in beams], sizes)
             rows, cols = cells.rows[free], cells.cols[free]
-            np.add.at(F, (rows, cols), p.l_free * w * echo_weight[free])
+            np.add.at(F, (rows, cols), (p.l_free * w * echo_weight[free]).astype(np.float32))
             F[rows, cols] = np.maximum(F[rows, cols], p.free_clamp)
         # The surface is at r; the occupied cell is the one just behind it.
         depth = p.hit_depth_cells * res
@@ -210,29 +225,32 @@ class LogOddsMapper:
         self._sweeps_since_full += 1
         self._update_support(full=False)
 
-    def _attribute(
-        self, first_arc: int, support: NDArray[np.float64] | None, rounds: int
-    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    def _attribute(self, first_arc: int, support: NDArray[np.float64] | None, rounds: int) -> NDArray[np.float64]:
         """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support`` (none: zero).
 
-        Returns the cells the arcs touch and the evidence they get, worked out on those cells alone."""
+        Works per slot (see ``_ArcStore``), so the cost follows the arcs, not the size of the map."""
         arcs = self._arcs
         lo = int(arcs.starts[first_arc])
         hi = arcs.n_cells
-        touched, slot = np.unique(arcs.cells[lo:hi], return_inverse=True)
+        slots = arcs.slots[lo:hi]
+        n = arcs.n_touched
         starts = arcs.starts[first_arc : arcs.n_arcs] - lo
         sizes = np.diff(np.append(starts, hi - lo))
         strength = self.params.l_occ * np.repeat(arcs.strength[first_arc : arcs.n_arcs], sizes)
-        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * self.free_evidence.ravel()[touched][slot])
-        before = support[touched] if support is not None else np.zeros(touched.size)
-        own: NDArray[np.float64] = np.zeros(touched.size)
+        free = self.free_evidence.reshape(-1)[arcs.touched]
+        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * free[slots])
+        before = np.zeros(n)
+        if support is not None:
+            before[: support.size] = support
+        own: NDArray[np.float64] = np.zeros(n)
+        gain, cap = self.params.explain_gain, self.params.explain_cap
         for _ in range(rounds + 1):
-            w = base * np.exp(self.params.explain_gain * np.minimum(before[slot] + own[slot], self.params.explain_cap))
+            w = base * np.exp(gain * np.minimum(before[slots] + own[slots], cap))
             wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
-            own = np.bincount(slot, weights=strength * w / np.maximum(wmax, 1e-12), minlength=touched.size).astype(
+            own = np.bincount(slots, weights=strength * w / np.maximum(wmax, 1e-12), minlength=n).astype(
                 np.float64, copy=False
             )
-        return touched, own
+        return own
 
     def _update_support(self, full: bool) -> None:
         """Share the echoes' evidence: all of them every ``reattribute_every`` sweeps (or when
@@ -247,12 +265,10 @@ class LogOddsMapper:
         if not arcs.n_arcs:
             return
         if full or self._support is None or self._sweeps_since_full >= p.reattribute_every:
-            touched, own = self._attribute(0, None, p.explain_rounds)
-            self._support = np.zeros(self.fine.rows * self.fine.cols)
-            self._support[touched] = own
+            self._support = self._attribute(0, None, p.explain_rounds)
             self._support_arcs = arcs.n_arcs
             self._sweeps_since_full = 0
-            self._recent = (np.zeros(0, dtype=np.int64), np.zeros(0))
+            self._recent = None
             self._occ_base = None
         elif arcs.n_arcs > self._support_arcs:
             self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
@@ -272,17 +288,19 @@ class LogOddsMapper:
         other echoes already put a surface in take the larger share.
         """
         if self._occ_cache is None:
+            contact = self.contact_evidence.reshape(-1)
             if self._occ_base is None:  # bumps and the last full sharing
                 self._occ_base = self.contact_evidence.copy()
                 if self._support is not None:
-                    self._occ_base += self._support.reshape(self._occ_base.shape).astype(np.float32)
+                    cells = self._arcs.touched[: self._support.size]
+                    self._occ_base.reshape(-1)[cells] = contact[cells] + self._support.astype(np.float32)
             occ = self._occ_base.copy()
             if self._recent is not None and self._support is not None:  # the echoes since, on their cells
-                touched, own = self._recent
-                flat = occ.reshape(-1)
-                flat[touched] = self.contact_evidence.reshape(-1)[touched] + (self._support[touched] + own).astype(
-                    np.float32
-                )
+                slots = np.flatnonzero(self._recent)
+                total = self._recent[slots]
+                total[slots < self._support.size] += self._support[slots[slots < self._support.size]]
+                cells = self._arcs.touched[slots]
+                occ.reshape(-1)[cells] = contact[cells] + total.astype(np.float32)
             self._occ_cache = occ
         return self._occ_cache
 
@@ -328,10 +346,9 @@ class LogOddsMapper:
         cols = np.arange(max(int(c1), 0), min(int(c0), f.cols - 1) + 1)
         if rows.size == 0 or cols.size == 0:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        rr, cc = np.meshgrid(rows, cols, indexing="ij")
-        cx, cy = f.index_to_world(rr, cc)
-        inside = np.hypot(cx - x, cy - y) <= radius
-        return rr[inside], cc[inside]
+        cx, cy = f.index_to_world(rows[:, None], cols[None, :])
+        ri, ci = np.nonzero(np.hypot(cx - x, cy - y) <= radius)
+        return rows[ri], cols[ci]
 
     def mark_body(self, pose: Pose) -> None:
         rows, cols = self._disk(pose.x, pose.y, self.robot.radius_m)
