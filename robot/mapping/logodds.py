@@ -59,6 +59,7 @@ class LogOddsParams(BaseModel):
     explain_rounds: int = Field(default=2, ge=0, le=10)  # explaining-away iterations
     explain_gain: float = Field(default=1.0, ge=0.0)  # share grows as exp(gain * support) ...
     explain_cap: float = Field(default=5.0, gt=0.0)  # ... up to this support
+    boundary_support: float = Field(default=5.0, ge=0.0)  # the room box's wall, as support for sharing
     reattribute_every: int = Field(default=10, ge=1)  # sweeps between re-sharing every echo
     aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
     free_inset_cells: float = Field(default=0.25, ge=0.0)  # a cleared cell lies this far inside the beam
@@ -145,7 +146,14 @@ class LogOddsMapper:
         self._fine_cache: NDArray[np.int8] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         self._outside = blocked_by_extent(frame)
+        # Evidence cells reaching past the surveyed room box (the padding included): its wall is there.
+        self._beyond_box = np.zeros(self.fine.rows * self.fine.cols, dtype=bool)
         if frame.extent is not None:
+            xs, ys = self.fine.centers()
+            min_x, min_y, max_x, max_y = frame.extent
+            h = 0.5 * f - 1e-9 * f  # a cell that only touches the box's edge is inside it
+            beyond = (xs - h < min_x) | (xs + h > max_x) | (ys - h < min_y) | (ys + h > max_y)
+            self._beyond_box = beyond.ravel()
             self._fine_outside = self._fine_outside_extent(frame.extent, 0.0)
             self._near_extent = self._fine_outside_extent(frame.extent, p.extent_snap_m)
         else:
@@ -242,6 +250,9 @@ class LogOddsMapper:
         before = np.zeros(n)
         if support is not None:
             before[: support.size] = support
+        # An echo whose arc reaches the room's wall is most likely the wall: the cells beyond the box
+        # count as supported, which explains away the arc's cells in the room.
+        before += self.params.boundary_support * self._beyond_box[arcs.touched]
         own: NDArray[np.float64] = np.zeros(n)
         gain, cap = self.params.explain_gain, self.params.explain_cap
         for _ in range(rounds + 1):
