@@ -16,6 +16,7 @@ from robot.hardware import EncoderCounts, ImuSample
 from robot.localization import DeadReckoning
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame
+from robot.mapping.logodds import LogOddsMapper, LogOddsParams
 from robot.metrics import score
 from robot.runner import frame_for_world, simulate
 from robot.settings import load_run_config
@@ -122,6 +123,57 @@ def test_a_no_echo_reading_clears_nothing() -> None:
     for _ in range(10):
         mapper.integrate(Pose(0.3, 1.0, 0.0), np.full(8, ROBOT.sonar.max_range_m))
     assert np.all(mapper.states() == UNKNOWN)
+
+
+def _front_echo_to(x_wall: float, pose: Pose) -> np.ndarray:
+    """A sweep in which only the front sonar hears an echo, off a surface at ``x_wall``."""
+    ranges = np.full(8, ROBOT.sonar.max_range_m)
+    ranges[0] = x_wall - pose.x - ROBOT.sonars[0].offset_x_m
+    return ranges
+
+
+def test_a_beam_that_runs_on_past_a_wrong_echo_clears_it() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    frame = MapFrame(grid=grid, start=Pose(0.5, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
+    pose = Pose(0.5, 1.5, 0.0)
+    row, ghost_col = (int(i) for i in grid.world_to_index(1.35, 1.5))
+
+    def final_row(recheck_within: float) -> np.ndarray:
+        mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(logodds=LogOddsParams(recheck_within=recheck_within)))
+        for x_wall in [1.3] * 3 + [2.2] * 12:  # three spurious short echoes, then the real wall
+            mapper.integrate(pose, _front_echo_to(x_wall, pose))
+        mapper.finalize()
+        return mapper.states()[row]
+
+    assert final_row(0.25)[ghost_col] == FREE
+    assert all(final_row(0.25)[c] == FREE for c in range(ghost_col, int(grid.world_to_index(2.0, 1.5)[1])))
+    # Without the re-check the ghost hides itself and everything behind it for good.
+    assert final_row(0.0)[ghost_col] == OCCUPIED
+    assert final_row(0.0)[ghost_col + 1] == UNKNOWN
+
+
+def test_echoes_off_the_room_box_are_explained_by_its_wall() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(0.4, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+
+    def evidence_inside_and_beyond(boundary_support: float) -> tuple[float, float]:
+        params = LogOddsParams(boundary_support=boundary_support)
+        mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(logodds=params))
+        assert isinstance(mapper, LogOddsMapper)
+        for y in np.arange(0.6, 1.45, 0.1):  # the box's right wall at x = 2, seen from 1.6 m
+            pose = Pose(0.4, float(y), 0.0)
+            mapper.integrate(pose, _front_echo_to(2.0, pose))
+        mapper.finalize()
+        occ = mapper.occupied_evidence()
+        xs, _ = mapper.fine.centers()
+        beyond = xs + mapper.fine.resolution / 2 > 2.0 + 1e-9  # reaching past the right wall
+        return float(occ[~beyond].sum()), float(occ[beyond].sum())
+
+    inside, beyond = evidence_inside_and_beyond(5.0)
+    inside_alone, beyond_alone = evidence_inside_and_beyond(0.0)
+    # The arcs' off-axis cells fall inside the room; with the wall as support they give way to it.
+    assert inside < 0.25 * inside_alone
+    assert beyond > beyond_alone
 
 
 def test_the_log_odds_map_does_not_depend_on_when_it_is_read() -> None:

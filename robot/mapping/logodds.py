@@ -59,6 +59,7 @@ class LogOddsParams(BaseModel):
     explain_rounds: int = Field(default=2, ge=0, le=10)  # explaining-away iterations
     explain_gain: float = Field(default=1.0, ge=0.0)  # share grows as exp(gain * support) ...
     explain_cap: float = Field(default=5.0, gt=0.0)  # ... up to this support
+    recheck_within: float = Field(default=0.25, ge=0.0, le=1.0)  # off-axis share in which a beam clears past echoes
     boundary_support: float = Field(default=5.0, ge=0.0)  # the room box's wall, as support for sharing
     reattribute_every: int = Field(default=10, ge=1)  # sweeps between re-sharing every echo
     aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
@@ -347,6 +348,10 @@ class LogOddsMapper:
             behind = (dist[:, None] >= occ_d[None, :] - 1e-9) & (
                 np.abs(off[:, None] - occ_a[None, :]) <= half_width[None, :]
             )
+            # A cell believed occupied does not hide itself from a beam that runs on past it near the
+            # beam's axis: that is how a wrongly placed echo gets cleared again.
+            central = np.abs(occ_a) <= self.params.recheck_within * self._half
+            behind[np.flatnonzero(hit)[central], np.flatnonzero(central)] = False
             free[own] &= ~np.any(behind, axis=1)
 
     def _disk(self, x: float, y: float, radius: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
