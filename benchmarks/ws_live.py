@@ -4,13 +4,19 @@ Starts ``sonarslam serve`` as its own process on an ephemeral 127.0.0.1 port (so
 not share an interpreter) and prints three measurements:
 
 1. bytes: everything one viewer receives during a whole run, against the same messages carrying
-   the full grid at every step instead of the changed cells (target: <= 5 %); once as plain text and
-   once with permessage-deflate (what browsers negotiate when the service has ``ws_compression`` on);
+   the full grid at every step instead of the changed cells (target: <= 5 %); once as plain text (a
+   viewer that does not offer compression, or any viewer at the default settings) and once with
+   permessage-deflate (what browsers negotiate when the service offers it: setting ``ws_compression``,
+   off by default);
 2. latency: step end on the server (``wall_time``, which steps carry for viewers that ask with
    ``?timing=1``) to arrival at a viewer, p50 / p99, with 1 and 50 viewers (target: p99 < 50 ms on loopback);
 3. slowdown: wall time of a max-speed run with 50 viewers against none (target: < 10 %).
 
+Latency and slowdown use the service's default settings unless ``--ws-compression`` says otherwise; their
+viewers offer permessage-deflate as browsers do, so the service compresses for every one of them.
+
     python benchmarks/ws_live.py [--only bytes|latency|slowdown] [--world room1] [--viewers 50]
+                                 [--repeats 5] [--ws-compression true|false]
 """
 
 from __future__ import annotations
@@ -252,8 +258,10 @@ def bench_bytes(url: str, world: str, resolutions: list[float]) -> None:
 
 
 # -- 2. latency ------------------------------------------------------------------------------------
-async def viewer_latencies(ws_url: str, out: list[float], counts: list[int]) -> None:
-    async with connect(ws_url, max_size=None, compression=None, max_queue=None) as ws:
+async def viewer_latencies(ws_url: str, out: list[float], counts: list[int], deflated: list[bool]) -> None:
+    # compression="deflate" (websockets' default) offers permessage-deflate, as a browser does.
+    async with connect(ws_url, max_size=None, max_queue=None) as ws:
+        deflated.append(any(isinstance(ext, PerMessageDeflate) for ext in ws.protocol.extensions))
         n = 0
         async for raw in ws:
             now = time.time()
@@ -265,30 +273,39 @@ async def viewer_latencies(ws_url: str, out: list[float], counts: list[int]) -> 
         counts.append(n)
 
 
-async def watch_many(ws_url: str, viewers: int) -> tuple[list[float], list[int]]:
+async def watch_many(ws_url: str, viewers: int) -> tuple[list[float], list[int], int]:
+    """Every viewer's latencies, steps seen per viewer, and how many viewers got permessage-deflate."""
     latencies: list[float] = []
     counts: list[int] = []
-    await asyncio.gather(*(viewer_latencies(ws_url, latencies, counts) for _ in range(viewers)))
-    return latencies, counts
+    deflated: list[bool] = []
+    await asyncio.gather(*(viewer_latencies(ws_url, latencies, counts, deflated) for _ in range(viewers)))
+    return latencies, counts, sum(deflated)
 
 
 def bench_latency(url: str, world: str, viewers: list[int], max_steps: int) -> None:
     print(f"\n2. pose latency, step end on the server -> arrival at a viewer ({world}, max speed, {max_steps} steps)")
     for n in viewers:
         run_id = queued_run(url, world, max_steps=max_steps)
-        latencies, counts = asyncio.run(watch_many(f"{url.replace('http', 'ws')}/ws/runs/{run_id}?timing=1", n))
+        latencies, counts, deflated = asyncio.run(
+            watch_many(f"{url.replace('http', 'ws')}/ws/runs/{run_id}?timing=1", n)
+        )
         run = wait_ended(url, run_id)
         ms = [1e3 * v for v in latencies]
         print(
             f"   {n:3d} viewer(s): p50 {percentile(ms, 50):6.2f} ms, p99 {percentile(ms, 99):6.2f} ms, "
             f"max {max(ms):6.1f} ms over {len(ms)} step messages "
-            f"({run['progress']['step']} steps in {run['wall_time_s']:.1f} s, min {min(counts)} steps per viewer)"
+            f"({run['progress']['step']} steps in {run['wall_time_s']:.1f} s, min {min(counts)} steps per viewer; "
+            f"permessage-deflate: {deflated} of {n})"
         )
 
 
 # -- 3. slowdown -----------------------------------------------------------------------------------
-async def drain(url: str, path: str) -> int:
+async def drain(url: str, path: str) -> tuple[int, bool]:
     """A viewer that costs its own machine next to nothing: the handshake, then read and discard bytes.
+
+    It offers permessage-deflate as a browser does, so that the service compresses for it whenever it
+    has ``ws_compression`` on; the frames are counted, never inflated. Returns the bytes received after
+    the handshake and whether the service accepted the offer.
 
     (Real viewers are browsers on other machines; parsing 50 streams here would compete with the
     service for this machine's cores and be counted as the service's slowdown.)"""
@@ -296,25 +313,33 @@ async def drain(url: str, path: str) -> int:
     reader, writer = await asyncio.open_connection(host, int(port))
     writer.write(
         f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n".encode()
+        "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+        "Sec-WebSocket-Extensions: permessage-deflate; client_max_window_bits\r\n\r\n".encode()
+    )
+    head = (await reader.readuntil(b"\r\n\r\n")).decode("latin-1").lower()
+    assert head.startswith("http/1.1 101"), head.splitlines()[0]
+    deflated = any(
+        line.startswith("sec-websocket-extensions:") and "permessage-deflate" in line for line in head.splitlines()
     )
     received = 0
     while chunk := await reader.read(1 << 16):
         received += len(chunk)
     writer.close()
-    return received
+    return received, deflated
 
 
-async def timed_run(url: str, world: str, viewers: int, max_steps: int) -> tuple[float, float, float]:
-    """The run's wall time, and the service's and its event loop's CPU time while it ran [s]."""
+async def timed_run(url: str, world: str, viewers: int, max_steps: int) -> tuple[float, float, float, int, int]:
+    """The run's wall time, the service's and its event loop's CPU time while it ran [s], the bytes all
+    viewers received, and how many of them got permessage-deflate."""
     run_id = await asyncio.to_thread(queued_run, url, world, max_steps=max_steps)
     viewing = [asyncio.create_task(drain(url, f"/ws/runs/{run_id}")) for _ in range(viewers)]
     await asyncio.sleep(0.8)  # the viewers connect while the run waits its turn (about 2 s)
     pid = SERVICE_PID[0]
     cpu0, loop0 = cpu_seconds(pid), cpu_seconds(pid, main_thread_only=True)
-    await asyncio.gather(*viewing)
+    drained = await asyncio.gather(*viewing)
     run = await asyncio.to_thread(wait_ended, url, run_id)
-    return float(run["wall_time_s"]), cpu_seconds(pid) - cpu0, cpu_seconds(pid, main_thread_only=True) - loop0
+    cpu, loop = cpu_seconds(pid) - cpu0, cpu_seconds(pid, main_thread_only=True) - loop0
+    return float(run["wall_time_s"]), cpu, loop, sum(b for b, _ in drained), sum(d for _, d in drained)
 
 
 def bench_slowdown(url: str, world: str, viewers: int, repeats: int, max_steps: int) -> None:
@@ -325,18 +350,26 @@ def bench_slowdown(url: str, world: str, viewers: int, repeats: int, max_steps: 
     cpu_watched: list[float] = []
     loop_alone: list[float] = []
     loop_watched: list[float] = []
+    received: list[int] = []
+    deflated: list[int] = []
     for _ in range(repeats):  # alternate, so that drift in machine load hits both alike
-        wall, cpu, loop = asyncio.run(timed_run(url, world, 0, max_steps))
+        wall, cpu, loop, _, _ = asyncio.run(timed_run(url, world, 0, max_steps))
         alone.append(wall)
         cpu_alone.append(cpu)
         loop_alone.append(loop)
-        wall, cpu, loop = asyncio.run(timed_run(url, world, viewers, max_steps))
+        wall, cpu, loop, nbytes, ndeflated = asyncio.run(timed_run(url, world, viewers, max_steps))
         watched.append(wall)
         cpu_watched.append(cpu)
         loop_watched.append(loop)
+        received.append(nbytes)
+        deflated.append(ndeflated)
     a, w = statistics.median(alone), statistics.median(watched)
     ca, cw = statistics.median(cpu_alone), statistics.median(cpu_watched)
     la, lw = statistics.median(loop_alone), statistics.median(loop_watched)
+    print(
+        f"   viewers offer permessage-deflate; the service accepted it for {min(deflated)}-{max(deflated)} of "
+        f"{viewers}; {statistics.median(received) / viewers / 1e3:.1f} kB on the wire per viewer and run (median)"
+    )
     print(f"   no viewers: median {a:.2f} s, best {min(alone):.2f} s {sorted(round(x, 2) for x in alone)}")
     print(f"   {viewers} viewers: median {w:.2f} s, best {min(watched):.2f} s {sorted(round(x, 2) for x in watched)}")
     # Other work on the machine only ever adds time: the best of several runs is the steadiest figure.
@@ -357,6 +390,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--viewers", type=int, default=50)
     parser.add_argument("--steps", type=int, default=400, help="steps per latency / slowdown run")
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument(
+        "--ws-compression",
+        choices=("true", "false"),
+        default=None,
+        help="the service's ws_compression for latency and slowdown (default: the service's default)",
+    )
     args = parser.parse_args(argv)
     print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.2f}")
     if args.only in (None, "bytes"):
@@ -365,12 +404,21 @@ def main(argv: list[str] | None = None) -> int:
         print("\n   every step sent (rate cap off): what a viewer of a real-time run gets")
         with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), **settings) as url:
             bench_bytes(url, args.world, [0.2, 0.1])
-        # The default settings: at most ws_max_rate_hz (30) messages a second per viewer, so the steps of
-        # a max-speed run that come faster are merged, as a dashboard needs no more.
-        print("\n   default settings (at most 30 messages a second per viewer), max-speed run")
+        # The default rate cap: at most ws_max_rate_hz (30) messages a second per viewer, so the steps of
+        # a max-speed run that come faster are merged, as a dashboard needs no more. Plain text is what
+        # every viewer gets at the default settings; the deflate lines are what a browser gets with
+        # ws_compression on.
+        print(
+            "\n   DEFAULT RATE CAP (at most 30 messages a second per viewer), max-speed run; plain text is the "
+            "default,\n   permessage-deflate what a browser gets with ws_compression on"
+        )
         with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), ws_compression="true") as url:
             bench_bytes(url, args.world, [0.2, 0.1])
-    with tempfile.TemporaryDirectory() as tmp, service(Path(tmp)) as url:
+    overrides = {} if args.ws_compression is None else {"ws_compression": args.ws_compression}
+    if args.only in (None, "latency", "slowdown"):
+        which = f"ws_compression={args.ws_compression}" if overrides else "default settings"
+        print(f"\n   latency and slowdown: service with {which}; viewers offer permessage-deflate")
+    with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), **overrides) as url:
         if args.only in (None, "latency"):
             bench_latency(url, args.world, [1, args.viewers], args.steps)
         if args.only in (None, "slowdown"):

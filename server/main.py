@@ -208,6 +208,9 @@ def serve(args: argparse.Namespace) -> int:
     config = uvicorn.Config(
         app,
         log_level=settings.log_level,
+        # Offered, never imposed: a viewer that does not ask for it gets plain frames. uvicorn's websockets-sansio
+        # protocol (its choice when websockets is installed) keeps a compressor per viewer: 4 kB window, memLevel 5,
+        # context kept between messages.
         ws_per_message_deflate=settings.ws_compression,
         ws_max_size=64 * 1024,
         timeout_graceful_shutdown=5,

@@ -40,7 +40,11 @@ class ServerSettings(BaseSettings):
     checkpoint_interval_s: float = Field(default=3.0, gt=0.0, le=3600.0)  # map checkpoint period [s wall]
     ws_queue_size: int = Field(default=64, ge=2, le=100_000)  # messages a viewer may fall behind before merging
     ws_max_rate_hz: float = Field(default=30.0, ge=1.0, le=10_000.0)  # messages per second per viewer, at most
-    ws_compression: bool = False  # per-message deflate: less traffic, more CPU per viewer
+    # Offer permessage-deflate to viewers (browsers accept it): about a third of the bytes on the wire, but
+    # each viewer's messages are compressed on the event loop, which shares the interpreter lock with the
+    # engines: 50 compressed viewers slowed a max-speed run by 40 % (docs/protocol.md, Compression).
+    # On: SONARSLAM_WS_COMPRESSION=true, or ws_compression = true in config/server.toml.
+    ws_compression: bool = False
     max_body_bytes: int = Field(default=1 << 20, ge=1024, le=1 << 30)  # any request body
     max_world_bytes: int = Field(default=256 << 10, ge=256, le=64 << 20)  # an uploaded world file
     max_grid_cells: int = Field(default=250_000, ge=100, le=50_000_000)  # rows x cols of one run's map

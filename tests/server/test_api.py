@@ -34,8 +34,6 @@ radius = 0.2
 """
 
 
-
-
 def field_of(response: httpx.Response) -> list[Any]:
     """The location of the (first) field at fault in a 422 body."""
     detail = response.json()["detail"]

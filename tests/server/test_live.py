@@ -25,8 +25,6 @@ def start_run(api: httpx.Client, **options: Any) -> str:
     return str(body["id"])
 
 
-
-
 def map_codes(api: httpx.Client, run_id: str) -> np.ndarray:
     response = api.get(f"/api/runs/{run_id}/map.csv")
     assert response.status_code == 200

@@ -4,67 +4,18 @@ from __future__ import annotations
 
 import io
 import os
-import queue
-import re
 import signal
-import subprocess
-import sys
-import threading
 import time
 import zipfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import httpx
 import numpy as np
 from live_client import csv_codes, run_async, watch
+from service_process import serve_process
 
 from robot.sensorlog import read_sensor_log
-
-URL_LINE = re.compile(r"(http://127\.0\.0\.1:\d+)/")
-
-
-@contextmanager
-def service(data_dir: Path) -> Iterator[tuple[subprocess.Popen[str], str]]:
-    """``sonarslam serve`` as its own process on an ephemeral port; yields it and its base URL."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith("SONARSLAM_")}
-    env["SONARSLAM_CHECKPOINT_INTERVAL_S"] = "0.3"
-    env["SONARSLAM_LOG_LEVEL"] = "warning"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "robot", "serve", "--port", "0", "--data-dir", str(data_dir)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-    )
-    lines: queue.Queue[str] = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(line) for line in proc.stdout or ()], daemon=True).start()
-    try:
-        deadline = time.monotonic() + 30
-        url = None
-        while url is None:
-            line = lines.get(timeout=max(0.1, deadline - time.monotonic()))
-            match = URL_LINE.search(line)
-            url = match.group(1) if match else None
-        with httpx.Client(base_url=url, timeout=10) as client:
-            while True:  # the URL is printed just before uvicorn takes over the socket
-                try:
-                    if client.get("/api/health").status_code == 200:
-                        break
-                except httpx.TransportError:
-                    assert time.monotonic() < deadline, "the service did not come up"
-                    time.sleep(0.05)
-        yield proc, url
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=10)
 
 
 def wait_for(predicate: Any, timeout_s: float = 60.0) -> None:
@@ -76,7 +27,7 @@ def wait_for(predicate: Any, timeout_s: float = 60.0) -> None:
 
 def test_kill_9_mid_run_then_restart(tmp_path: Path) -> None:
     data = tmp_path / "data"
-    with service(data) as (proc, url), httpx.Client(base_url=url, timeout=30) as api:
+    with serve_process(data, checkpoint_interval_s="0.3") as (proc, url), httpx.Client(base_url=url, timeout=30) as api:
         done_id = api.post("/api/runs", json={"world": "room2", "speed": "max", "max_steps": 25}).json()["id"]
         wait_for(lambda: api.get(f"/api/runs/{done_id}").json()["status"] == "finished")
         before = api.get(f"/api/runs/{done_id}").json()
@@ -88,7 +39,8 @@ def test_kill_9_mid_run_then_restart(tmp_path: Path) -> None:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
 
-    with service(data) as (_proc, url), httpx.Client(base_url=url, timeout=30) as api:
+    restarted = serve_process(data, checkpoint_interval_s="0.3")
+    with restarted as (_proc, url), httpx.Client(base_url=url, timeout=30) as api:
         after = api.get(f"/api/runs/{done_id}").json()
         for key in ("status", "terminated_by", "metrics", "progress", "ended_at", "wall_time_s"):
             assert after[key] == before[key], key
