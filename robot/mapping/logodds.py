@@ -60,6 +60,7 @@ class LogOddsParams(BaseModel):
     explain_gain: float = Field(default=1.0, ge=0.0)  # share grows as exp(gain * support) ...
     explain_cap: float = Field(default=5.0, gt=0.0)  # ... up to this support
     recheck_within: float = Field(default=0.25, ge=0.0, le=1.0)  # off-axis share in which a beam clears past echoes
+    recheck_below: float = Field(default=3.0, gt=0.0)  # ... and only cells with less evidence than this
     boundary_support: float = Field(default=5.0, ge=0.0)  # the room box's wall, as support for sharing
     reattribute_every: int = Field(default=10, ge=1)  # sweeps between re-sharing every echo
     aperture_m: float = Field(default=0.03, ge=0.0)  # beam width at the transducer
@@ -351,6 +352,7 @@ class LogOddsMapper:
             # A cell believed occupied does not hide itself from a beam that runs on past it near the
             # beam's axis: that is how a wrongly placed echo gets cleared again.
             central = np.abs(occ_a) <= self.params.recheck_within * self._half
+            central &= L[cells.rows[own][hit], cells.cols[own][hit]] < self.params.recheck_below
             behind[np.flatnonzero(hit)[central], np.flatnonzero(central)] = False
             free[own] &= ~np.any(behind, axis=1)
 
