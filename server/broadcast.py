@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -11,6 +12,7 @@ from typing import Any
 
 TERMINAL_EVENTS = frozenset({"finished", "stopped", "error", "interrupted"})
 SHARED_MERGES = 64  # recent merged steps kept for other viewers
+TRAIL_TOLERANCE_MM = 5.0  # a merged step's trail leaves out points its polyline passes this close to
 
 
 def encode(message: dict[str, Any]) -> str:
@@ -54,11 +56,59 @@ class Outgoing:
         return self._timed
 
 
+def _off_segment_mm(p: list[int], a: list[int], b: list[int]) -> float:
+    """Distance [mm] from ``p`` to the segment ``a``-``b``."""
+    ax, ay = a
+    dx, dy = b[0] - ax, b[1] - ay
+    px, py = p[0] - ax, p[1] - ay
+    length2 = dx * dx + dy * dy
+    t = 0.0 if length2 == 0 else min(1.0, max(0.0, (px * dx + py * dy) / length2))
+    return math.hypot(px - t * dx, py - t * dy)
+
+
+def _simplify_run(points: list[list[int]], tolerance_mm: float) -> list[list[int]]:
+    """Douglas-Peucker on a polyline: its ends and the points it cannot leave out without straying more
+    than ``tolerance_mm`` (a robot that drives straight and turns on the spot: its corners)."""
+    keep = [False] * len(points)
+    keep[0] = keep[-1] = True
+    spans = [(0, len(points) - 1)]
+    while spans:
+        i, j = spans.pop()
+        if j - i < 2:
+            continue
+        far, at = max((_off_segment_mm(points[k], points[i], points[j]), k) for k in range(i + 1, j))
+        if far > tolerance_mm:
+            keep[at] = True
+            spans += [(i, at), (at, j)]
+    return [p for p, k in zip(points, keep, strict=True) if k]
+
+
+def simplify_trail(trail: list[list[Any]], end: list[Any] | None, tolerance_mm: float = TRAIL_TOLERANCE_MM
+                   ) -> list[list[Any]]:  # fmt: skip
+    """A merged step's trail with the points a viewer's drawn path does not need: repeats, and points on
+    a straight stretch; ``end`` is where the path goes on to (the merged step's pose). The first point
+    always stays (the viewer's path comes to it from a pose the merge does not know), and so does every
+    point next to an unknown (``None``) position."""
+    path = [*trail, end[:2]] if end is not None else list(trail)
+    out: list[list[Any]] = []
+    run: list[list[int]] = []
+    for point in [*path, None]:
+        if point is not None and None not in point:
+            run.append(point)
+            continue
+        if run:
+            out += _simplify_run(run, tolerance_mm) if len(run) > 2 else run
+            run = []
+        if point is not None:
+            out.append(point)
+    return out[:-1] if end is not None else out  # the end itself goes as the pose
+
+
 def merge_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
     """One ``step`` standing for several: the union of their cell changes (latest state per cell) and,
     of every other field, the value in the latest step that has it (a step carries only what changed);
-    ``trail`` the positions the earlier steps ended at, so a viewer's trail keeps every corner;
-    ``merged`` counts the steps it replaces."""
+    ``trail`` the positions the earlier steps ended at where the path turns (``simplify_trail``), so a
+    viewer's trail keeps every corner; ``merged`` counts the steps it replaces."""
     out: dict[str, Any] = {}
     cells: dict[tuple[int, int], int] = {}
     trail: list[list[int]] = []  # where the robot ended each step but the last (whose end is ``pose``)
@@ -79,6 +129,7 @@ def merge_steps(steps: list[dict[str, Any]]) -> dict[str, Any]:
     if "step" in steps[-1]:
         out["step"] = steps[-1]["step"]
     out.pop("trail", None)
+    trail = simplify_trail(trail, out.get("pose"))
     if trail:
         out["trail"] = trail
     out.pop("cells", None)

@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from typing import Any
 
+import numpy as np
 from live_client import run_async
 
-from server.broadcast import Broadcaster, Outgoing, Subscriber, merge_steps
+from server.broadcast import (
+    TRAIL_TOLERANCE_MM,
+    Broadcaster,
+    Outgoing,
+    Subscriber,
+    _off_segment_mm,
+    merge_steps,
+    simplify_trail,
+)
 
 
 def step(seq: int, cells: list[list[int]]) -> dict[str, Any]:
@@ -33,7 +43,7 @@ def drain(sub: Subscriber) -> list[dict[str, Any]]:
 def test_merging_keeps_the_latest_state_of_each_cell_in_order() -> None:
     merged = merge_steps([step(5, [[1, 1, 0], [2, 2, 1]]), step(6, [[1, 1, 1]]), step(7, [[3, 3, 2]])])
     assert merged["seq"] == 7 and merged["merged"] == 3 and merged["pose"] == [700, 0, 0]
-    assert merged["trail"] == [[500, 0], [600, 0]]
+    assert merged["trail"] == [[500, 0]]  # 600 lies on the way from 500 to the pose, 700
     assert merged["cells"] == [[2, 2, 1], [1, 1, 1], [3, 3, 2]]
     again = merge_steps([merged, step(8, [[2, 2, 0]])])
     assert again["merged"] == 4 and again["seq"] == 8
@@ -128,7 +138,7 @@ def test_a_merged_step_carries_the_latest_value_of_every_field_that_any_merged_s
         "action": "explore",
         "metrics": {"f1": 0.5},
         "target": None,
-        "trail": [[100, 0], [300, 0]],  # where steps 5 and 6 ended; step 7 ends at ``pose``
+        "trail": [[100, 0]],  # where step 5 ended; step 6 ended where step 7 does, at ``pose``
         "cells": [[1, 1, 0]],
         "merged": 3,
     }
@@ -165,7 +175,25 @@ def test_a_merged_step_keeps_every_position_the_robot_ended_a_step_at() -> None:
     c = {"type": "step", "seq": 4, "pose": [300, 0, 0]}
     first = merge_steps([still, a, b])
     assert first["trail"] == [[100, 0]] and first["pose"] == [100, 0, 0]  # b ended where a did: at pose
-    # Merging a merged step again keeps its trail, oldest first.
-    again = merge_steps([first, c, {"type": "step", "seq": 5, "pose": [500, 0, 0]}])
-    assert again["trail"] == [[100, 0], [100, 0], [300, 0]] and again["merged"] == 5
+    # Merging a merged step again keeps its trail, oldest first, and the corners of the path.
+    again = merge_steps([first, c, {"type": "step", "seq": 5, "pose": [300, 200, 0]}])
+    assert again["trail"] == [[100, 0], [300, 0]] and again["merged"] == 5
     assert "trail" not in merge_steps([still, {"type": "step", "seq": 2, "t_s": 2.0}])
+
+
+def test_a_merged_trail_keeps_the_corners_and_leaves_out_straight_stretches() -> None:
+    # Cell moves of 200 mm with a turn on the spot (a repeated point) and a 2 mm wobble.
+    trail = [[0, 0], [200, 0], [400, 2], [400, 2], [600, 0], [600, 200], [600, 400]]
+    assert simplify_trail(trail, [800, 600, 785]) == [[0, 0], [600, 0], [600, 400]]
+    # A bend wider than the tolerance stays; an unknown position breaks the path on both sides.
+    assert simplify_trail([[0, 0], [100, 6], [200, 0]], [200, 300, 0]) == [[0, 0], [100, 6], [200, 0]]
+    broken = [[0, 0], [100, 0], [None, None], [300, 0], [400, 0]]
+    assert simplify_trail(broken, [500, 0, 0]) == [[0, 0], [100, 0], [None, None], [300, 0]]
+    # Whatever it leaves out lies within the tolerance of the path it keeps.
+    rng = np.random.default_rng(3)
+    walk = np.cumsum(rng.choice([-200, 0, 200], size=(300, 2)), axis=0).tolist()
+    kept = simplify_trail(walk[:-1], walk[-1])
+    path = [*kept, walk[-1]]
+    for p in walk:
+        assert min(_off_segment_mm(p, a, b) for a, b in itertools.pairwise(path)) <= TRAIL_TOLERANCE_MM
+    assert len(kept) < len(walk) - 1
