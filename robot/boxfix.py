@@ -81,8 +81,24 @@ def box_fix(
     With ``evidence`` (the map so far), a reading counts only where the map already shows the box
     edge as a wall across the beam's footprint.
     """
+    ox, oy = box_offsets(frame, robot, pose, ranges_m, config, evidence)
+    dx = config.gain * ox if ox is not None else 0.0
+    dy = config.gain * oy if oy is not None else 0.0
+    return dx, dy
+
+
+def box_offsets(
+    frame: MapFrame,
+    robot: RobotConfig,
+    pose: Pose,
+    ranges_m: NDArray[np.float64],
+    config: BoxFixConfig,
+    evidence: Evidence | None = None,
+) -> tuple[float | None, float | None]:
+    """The position error (true minus estimated) [m] along x and along y that the box's walls show
+    in one sweep (the median over the beams that count), or None for an axis no beam measured."""
     if frame.extent is None or not config.enabled:
-        return 0.0, 0.0
+        return None, None
     min_x, min_y, max_x, max_y = frame.extent
     tol = math.radians(config.axis_tolerance_deg)
     half = math.radians(robot.sonar.beam_width_deg) / 2.0
@@ -112,6 +128,4 @@ def box_fix(
                 if not _edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
                     continue
             (dxs if horizontal else dys).append(offset)
-    dx = config.gain * float(np.median(dxs)) if dxs else 0.0
-    dy = config.gain * float(np.median(dys)) if dys else 0.0
-    return dx, dy
+    return (float(np.median(dxs)) if dxs else None), (float(np.median(dys)) if dys else None)

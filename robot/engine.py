@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from robot.boxfix import box_fix
 from robot.config import RobotConfig
 from robot.explore import Action, Explorer
 from robot.grid import OCCUPIED, UNKNOWN
 from robot.hardware import Hardware
+from robot.headingfix import WallFixes
 from robot.localization import DeadReckoning, PoseEstimate
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame, blocked_by_extent
@@ -87,6 +87,7 @@ class SlamEngine:
         self.frame = frame
         self.mapper = make_mapper(config.mapper, frame, robot, config)
         self.dead_reckoning = DeadReckoning(robot, frame.start, config.localization)
+        self.fixes = WallFixes(frame, robot, config.box_fix, config.heading_fix)
         self._user_tick = on_tick
         self._last_body_xy = (frame.start.x, frame.start.y)
         self.recorder = recorder
@@ -129,13 +130,9 @@ class SlamEngine:
         sweep, est = self.pilot.sweep()
         if self.recorder is not None:
             self.recorder.sweep(sweep)
-        dx, dy = box_fix(
-            self.frame, self.robot, est.as_pose(), sweep.ranges_m, self.config.box_fix, self.mapper.evidence()
-        )
-        if dx or dy:
-            est = self.dead_reckoning.shift_position(dx, dy)
-        self.mapper.integrate(est.as_pose(), sweep.ranges_m)
-        self.mapper.mark_body(est.as_pose())
+        pose = self.fixes.apply(self.dead_reckoning, est.as_pose(), sweep.ranges_m, self.mapper.evidence())
+        self.mapper.integrate(pose, sweep.ranges_m)
+        self.mapper.mark_body(pose)
         self.last_sweep = sweep.ranges_m
         self.stats.sweeps += 1
 

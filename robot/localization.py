@@ -64,6 +64,8 @@ class DeadReckoning:
         self._H_still = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
         self._x = start.x
         self._y = start.y
+        self._odo_x = start.x  # the same, without external position fixes
+        self._odo_y = start.y
         self._last_counts: tuple[int, int] | None = None
         self._last_t: float | None = None
         # Encoder yaw-rate quantisation: each wheel's count is off by up to one count.
@@ -77,10 +79,23 @@ class DeadReckoning:
             self._x, self._y, wrap_angle(float(x[0])), math.sqrt(max(self._kf.P[0, 0], 0.0)), float(x[2])
         )
 
+    @property
+    def odometry_xy(self) -> tuple[float, float]:
+        """The position from odometry alone [m]: what it would be without ``shift_position``."""
+        return self._odo_x, self._odo_y
+
     def shift_position(self, dx: float, dy: float) -> PoseEstimate:
         """Move the position estimate by an external fix [m]."""
         self._x += dx
         self._y += dy
+        return self.estimate
+
+    def correct_heading(self, delta_rad: float, std_rad: float) -> PoseEstimate:
+        """An external measurement of the heading error (true minus estimated) [rad], as a Kalman
+        update: the filter weighs it against its own doubt and corrects the gyro bias with it."""
+        kf = self._kf
+        z = np.array([float(kf.x[0]) + delta_rad])
+        kf.update(z, R=np.array([[std_rad**2]]), H=np.array([[1.0, 0.0, 0.0]]))
         return self.estimate
 
     def reset_origin(self, counts: EncoderCounts) -> None:
@@ -145,6 +160,9 @@ class DeadReckoning:
         # Position: encoder distance along the mid-tick fused heading.
         ds = (dl + dr) / 2.0
         theta_mid = 0.5 * (theta_before + float(kf.x[0]))
-        self._x += ds * math.cos(theta_mid)
-        self._y += ds * math.sin(theta_mid)
+        step_x, step_y = ds * math.cos(theta_mid), ds * math.sin(theta_mid)
+        self._x += step_x
+        self._y += step_y
+        self._odo_x += step_x
+        self._odo_y += step_y
         return self.estimate

@@ -21,12 +21,12 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ValidationError
 
-from robot.boxfix import box_fix
 from robot.config import CONFIG_DIR, RobotConfig, format_validation_error
 from robot.engine import classify
 from robot.errors import ConfigError, LogFormatError
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, cells_to_cover
 from robot.hardware import EncoderCounts, ImuSample
+from robot.headingfix import WallFixes
 from robot.localization import DeadReckoning
 from robot.mapio import atomic_write_bytes, write_map_files
 from robot.mapping import Mapper, make_mapper
@@ -199,6 +199,7 @@ def replay_sensor_log(
     first = next(records, None)
     records = itertools.chain([first] if first is not None else [], records)
     dr = DeadReckoning(robot, frame.start, slam.localization)
+    fixes = WallFixes(frame, robot, slam.box_fix, slam.heading_fix)
     # Logs record where the encoders start (an O record); for older logs without one, the counts
     # are cumulative since start-up, so zero, taken at the clock's zero when the clock starts with
     # the run (the simulator's does), else at the first record.
@@ -236,9 +237,7 @@ def replay_sensor_log(
                     f"{path}: sweep at t={rec.t_s:.4f} s has {len(rec.values)} ranges; "
                     f"the header lists {n_sonars} sonars"
                 )
-            dx, dy = box_fix(frame, robot, pose, rec.ranges, slam.box_fix, mapper.evidence())  # as the engine does
-            if dx or dy:
-                pose = dr.shift_position(dx, dy).as_pose()
+            pose = fixes.apply(dr, pose, rec.ranges, mapper.evidence())  # as the engine does
             mapper.integrate(pose, rec.ranges)
             mapper.mark_body(pose)
             sweeps.append((rec.t_s, pose.x, pose.y, pose.theta))

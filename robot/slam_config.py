@@ -11,6 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from robot.boxfix import BoxFixConfig
 from robot.config import CONFIG_DIR, RobotConfig, format_validation_error, read_toml
 from robot.errors import ConfigError
+from robot.headingfix import HeadingFixConfig
 from robot.localization import LocalizationConfig
 from robot.mapping.logodds import LogOddsParams
 from robot.motion import MotionConfig
@@ -38,6 +39,7 @@ class SlamConfig(BaseModel):
     motion: MotionConfig = MotionConfig()
     localization: LocalizationConfig = LocalizationConfig()
     box_fix: BoxFixConfig = BoxFixConfig()
+    heading_fix: HeadingFixConfig = HeadingFixConfig()
 
     def nav_block(self, robot: RobotConfig) -> int:
         """Map cells per navigation-cell side: enough to hold the body and its turning circle."""
