@@ -12,7 +12,7 @@ from robot.runner import simulate
 from robot.settings import load_run_config
 from robot.world import load_world
 
-# world: (minimum F1, minimum recall); the large hall is the hardest (few walls in sonar range).
+# world: (minimum F1, minimum recall).
 BARS = {
     "room1": (0.93, 0.99),
     "room2": (0.88, 0.90),
@@ -23,13 +23,17 @@ BARS = {
     "clutter": (0.88, 0.85),
     "hexagon": (0.93, 0.90),
     "tworooms": (0.90, 0.95),
-    "hall": (0.75, 0.90),
+    "hall": (0.90, 0.90),
+    "bigroom": (0.93, 0.92),
+    "longroom": (0.90, 0.85),
+    "trapezoid": (0.93, 0.92),
+    "ushape": (0.94, 0.97),
+    "office": (0.95, 0.96),
+    "ring": (0.94, 0.97),
 }
-# Final position error [m]: the 10 cm target everywhere but in the hall, where a run lasts 90
-# minutes, mostly out of reach of the box fix's 1.2 m, and the gyro's angle random walk alone adds
-# 1-2 degrees of heading error by the end. The hall does not meet the target (README: 9.7 cm mean,
-# 23.8 cm worst over 6 seeds, seed 0 among the worst); its bar only catches a collapse.
-MAX_XY_ERROR_M = {"hall": 0.30}
+# The 9 x 7 m hall may also end by the time limit, the paper's other rule: on seed 0 four frontier
+# cells stayed while the robot visited the cells it had left, and the map did not change for 20 minutes.
+ENDS = {"hall": ("complete", "time_limit")}
 
 
 @pytest.mark.parametrize("name", sorted(BARS))
@@ -38,9 +42,8 @@ def test_a_default_run_maps_the_world_well(name: str) -> None:
     result = simulate(load_world(name), cfg.robot, cfg.noise, cfg.slam, seed=0)
     min_f1, min_recall = BARS[name]
     m = result.metrics
-    assert result.terminated_by == "complete"
+    assert result.terminated_by in ENDS.get(name, ("complete",))
     assert m.f1 >= min_f1, f"{name}: F1 {m.f1:.3f}"
     assert m.recall >= min_recall, f"{name}: recall {m.recall:.3f}"
-    max_xy = MAX_XY_ERROR_M.get(name, 0.10)
-    assert result.final_xy_error_m <= max_xy, f"{name}: final position error {result.final_xy_error_m:.3f} m"
+    assert result.final_xy_error_m <= 0.10, f"{name}: final position error {result.final_xy_error_m:.3f} m"
     assert result.final_theta_error_deg <= 3.0, f"{name}: final heading error {result.final_theta_error_deg:.2f} deg"
