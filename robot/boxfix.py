@@ -37,9 +37,14 @@ class BoxFixConfig(BaseModel):
     edge_support: float = Field(default=0.7, ge=0.0, le=1.0)  # share of the footprint seen solid
     edge_band_m: tuple[float, float] = (0.02, 0.06)  # solid evidence counts this far inside / outside the edge
     occupied_logodds: float = Field(default=0.8, gt=0.0)  # evidence that counts as solid
+    # A bump while driving towards a box wall (within this angle of head-on), with the body this
+    # close to touching it by the estimate, is that wall: a position fix (0 turns this off). Wider
+    # than the sonar gate: a bump is unambiguous, and it comes when the estimate is off the most.
+    contact_gate_m: float = Field(default=0.15, ge=0.0)
+    contact_max_angle_deg: float = Field(default=50.0, gt=0.0, lt=90.0)
 
 
-def _edge_supported(
+def edge_supported(
     evidence: Evidence,
     hit: tuple[float, float],
     horizontal: bool,
@@ -125,7 +130,7 @@ def box_offsets(
             if evidence is not None:
                 hit = (edge, beam.y) if horizontal else (beam.x, edge)
                 outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
-                if not _edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
+                if not edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
                     continue
             (dxs if horizontal else dys).append(offset)
     return (float(np.median(dxs)) if dxs else None), (float(np.median(dys)) if dys else None)

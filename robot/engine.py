@@ -148,7 +148,11 @@ class SlamEngine:
                 return False
             moved = self.pilot.drive_to(x, y)
             if not moved.ok:
-                self.mapper.mark_contact(moved.pose.as_pose(), heading)
+                pose, unexplained = self.fixes.contact(
+                    self.dead_reckoning, moved.pose.as_pose(), heading, self.mapper.evidence()
+                )
+                if unexplained:
+                    self.mapper.mark_contact(pose, heading)
                 if self.recorder is not None:
                     self.recorder.contact(self.hw.now(), heading)
                 return False

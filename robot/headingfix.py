@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, box_offsets
+from robot.boxfix import BoxFixConfig, box_offsets, edge_supported
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
@@ -127,9 +127,9 @@ class WallHeading:
         cfg = self.config
         a = self._design(is_x, ox, oy) / cfg.fix_std_m
         b = err / cfg.fix_std_m
-        # The scale's prior (zero), and a weak one on each offset so that an axis without fixes
-        # leaves the system solvable.
-        prior = np.diag([1e-3, 1e-3, 0.0, 1.0 / cfg.scale_prior_std])
+        # The scale's prior (zero), and a loose one (1 m) on each offset so that an axis without
+        # fixes leaves the system solvable: fixes along one wall alone still measure the heading.
+        prior = np.diag([1.0, 1.0, 0.0, 1.0 / cfg.scale_prior_std])
         a = np.vstack([a, prior])
         b = np.concatenate([b, np.zeros(4)])
         normal = a.T @ a
@@ -149,6 +149,7 @@ class WallFixes:
         self.box = box
         self.heading = WallHeading(heading) if heading.enabled and box.enabled and frame.extent is not None else None
         self.heading_fixes: list[HeadingFit] = []
+        self.contact_fixes = 0
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
         """The pose after this sweep's fixes (``pose`` itself when there are none)."""
@@ -168,3 +169,36 @@ class WallFixes:
             self.heading.reset()
             self.heading_fixes.append(fit)
         return est.as_pose()
+
+    def contact(
+        self, dr: DeadReckoning, pose: Pose, direction_rad: float, evidence: Evidence | None
+    ) -> tuple[Pose, bool]:
+        """A bump while driving along ``direction_rad``. When the body would touch a box wall ahead
+        within ``contact_gate_m`` of where the estimate puts it, and the map shows that edge as a
+        wall there (in a room that is not a rectangle an angled wall may meet the box edge), the
+        bump was that wall: it fixes the position across the wall, and needs no contact evidence.
+        Returns the pose and whether the bump should still be marked on the map."""
+        gate = self.box.contact_gate_m
+        if self.frame.extent is None or not self.box.enabled or gate <= 0.0:
+            return pose, True
+        min_x, min_y, max_x, max_y = self.frame.extent
+        radius = self.robot.radius_m
+        along = (math.cos(direction_rad), math.sin(direction_rad))
+        head_on = math.cos(math.radians(self.box.contact_max_angle_deg))
+        best: tuple[float, int, float] | None = None  # |offset|, axis, offset
+        for axis, sign, edge in ((0, 1.0, max_x), (0, -1.0, min_x), (1, 1.0, max_y), (1, -1.0, min_y)):
+            if sign * along[axis] < head_on:
+                continue
+            offset = (edge - sign * radius) - (pose.x, pose.y)[axis]  # the body touching the wall
+            if abs(offset) > gate or (best is not None and abs(offset) >= best[0]):
+                continue
+            hit = (edge, pose.y) if axis == 0 else (pose.x, edge)
+            if evidence is None or not edge_supported(evidence, hit, axis == 0, sign, 2 * radius, self.box):
+                continue
+            best = (abs(offset), axis, offset)
+        if best is None:
+            return pose, True
+        _, axis, offset = best
+        est = dr.shift_position(offset if axis == 0 else 0.0, offset if axis == 1 else 0.0)
+        self.contact_fixes += 1
+        return est.as_pose(), False

@@ -242,7 +242,9 @@ def replay_sensor_log(
             mapper.mark_body(pose)
             sweeps.append((rec.t_s, pose.x, pose.y, pose.theta))
         elif rec.kind == "B":
-            mapper.mark_contact(pose, rec.values[0])
+            pose, unexplained = fixes.contact(dr, pose, rec.values[0], mapper.evidence())  # as the engine does
+            if unexplained:
+                mapper.mark_contact(pose, rec.values[0])
         elif rec.kind == "O":
             dr.reset_origin(EncoderCounts(rec.t_s, int(rec.values[0]), int(rec.values[1])))
     mapper.finalize()  # as the engine does when the run ends

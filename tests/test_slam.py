@@ -336,6 +336,13 @@ def test_position_fixes_that_drift_across_the_travel_reveal_the_heading_error() 
     assert math.degrees(fit.delta_rad) == pytest.approx(1.0, abs=0.15)
     assert fit.std_rad < math.radians(0.2)
 
+    # Fixes along one wall alone measure it too.
+    one_wall = WallHeading(HeadingFixConfig())
+    for y in np.arange(0.5, 4.5, 0.02):
+        one_wall.add(0, 0.02 - delta * y + rng.normal(0.0, 0.01), 0.4, float(y))
+    fit = one_wall.fit()
+    assert fit is not None and math.degrees(fit.delta_rad) == pytest.approx(1.0, abs=0.15)
+
     # Fixes from one place say nothing about the heading.
     still = WallHeading(HeadingFixConfig())
     for _ in range(200):
@@ -357,6 +364,35 @@ def test_a_heading_fix_corrects_the_filter_and_odometry_ignores_position_fixes()
     assert math.degrees(after.theta - before.theta) == pytest.approx(2.0, abs=0.05)
     assert after.theta_std < before.theta_std
     assert (after.x, after.y) == pytest.approx((before.x + 0.05, before.y - 0.02))
+
+
+def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
+    from robot.boxfix import BoxFixConfig
+    from robot.headingfix import HeadingFixConfig, WallFixes
+
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in np.arange(0.6, 1.4, 0.05)])
+    fixes = WallFixes(frame, ROBOT, BoxFixConfig(), HeadingFixConfig())
+
+    def bump(believed: Pose, direction_deg: float, evidence) -> tuple[Pose, bool, tuple[float, float]]:
+        dr = DeadReckoning(ROBOT, believed)
+        pose, unexplained = fixes.contact(dr, believed, math.radians(direction_deg), evidence)
+        return pose, unexplained, (dr.estimate.x, dr.estimate.y)
+
+    # The estimate puts the body 10 cm short of the east wall when it touches it: the wall is right.
+    pose, unexplained, xy = bump(Pose(2.0 - ROBOT.radius_m - 0.10, 1.0, 0.0), 0.0, wall)
+    assert not unexplained and xy == pytest.approx((2.0 - ROBOT.radius_m, 1.0))
+    assert (pose.x, pose.y) == pytest.approx(xy)
+    # Diagonally into the same wall still counts; driving along it, or far from it, does not.
+    assert not bump(Pose(1.85, 1.0, 0.0), -45.0, wall)[1]
+    assert bump(Pose(1.85, 1.0, 0.0), 80.0, wall)[1]
+    assert bump(Pose(1.5, 1.0, 0.0), 0.0, wall)[1]
+    # Where the map does not show the box edge as a wall (a corner of an angled wall may touch
+    # it), the bump is something else and is kept as contact evidence.
+    before = Pose(2.0 - ROBOT.radius_m - 0.05, 1.0, 0.0)
+    pose, unexplained, _ = bump(before, 0.0, _evidence_with_solid(frame, [(2.02, 1.0)]))
+    assert unexplained and pose == before
 
 
 def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
