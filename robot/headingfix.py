@@ -13,6 +13,9 @@ into the heading filter as a measurement, and the collection starts again.
 Position fixes alone cannot do this: they stop the position from drifting near the walls, but a
 heading that is off by two degrees puts a wall seen from the middle of a large room 20 cm off its
 place, and lets the position drift past the fixes' gate, after which they stop.
+
+``WallFixes`` applies both to the dead reckoning, sweep by sweep, and also takes a bump into a box
+wall as a position fix: the engine and the replay of a log call it alike, so a log replays exactly.
 """
 
 from __future__ import annotations

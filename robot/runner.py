@@ -164,6 +164,8 @@ def simulate(
         extra={
             "collisions": sim.collisions,
             "failed_moves": engine.stats.failed_moves,
+            "heading_fixes": len(engine.fixes.heading_fixes),
+            "bump_fixes": engine.fixes.contact_fixes,
             "sweeps": engine.stats.sweeps,
             "distance_m": round(sim.odometer_m, 3),
         },
