@@ -48,6 +48,8 @@ from websockets.extensions.base import Extension
 from websockets.extensions.permessage_deflate import ClientPerMessageDeflateFactory, PerMessageDeflate
 from websockets.frames import CTRL_OPCODES, Frame
 
+from server.settings import ServerSettings
+
 URL_LINE = re.compile(r"(http://127\.0\.0\.1:\d+)/")
 
 
@@ -404,12 +406,14 @@ def main(argv: list[str] | None = None) -> int:
         print("\n   every step sent (rate cap off): what a viewer of a real-time run gets")
         with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), **settings) as url:
             bench_bytes(url, args.world, [0.2, 0.1])
-        # The default rate cap: at most ws_max_rate_hz (30) messages a second per viewer, so the steps of
+        # The default rate cap: at most ws_max_rate_hz messages a second per viewer, so the steps of
         # a max-speed run that come faster are merged, as a dashboard needs no more. Plain text is what
         # every viewer gets at the default settings; the deflate lines are what a browser gets with
         # ws_compression on.
+        rate = ServerSettings.model_fields["ws_max_rate_hz"].default
         print(
-            "\n   DEFAULT RATE CAP (at most 30 messages a second per viewer), max-speed run; plain text is the "
+            f"\n   DEFAULT RATE CAP (at most {rate:g} messages a second per viewer), "
+            "max-speed run; plain text is the "
             "default,\n   permessage-deflate what a browser gets with ws_compression on"
         )
         with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), ws_compression="true") as url:
