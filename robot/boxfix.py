@@ -86,10 +86,13 @@ def box_fix(
     With ``evidence`` (the map so far), a reading counts only where the map already shows the box
     edge as a wall across the beam's footprint.
     """
-    ox, oy = box_offsets(frame, robot, pose, ranges_m, config, evidence)
-    dx = config.gain * ox if ox is not None else 0.0
-    dy = config.gain * oy if oy is not None else 0.0
-    return dx, dy
+    return box_shift(config, box_offsets(frame, robot, pose, ranges_m, config, evidence))
+
+
+def box_shift(config: BoxFixConfig, offsets: tuple[float | None, float | None]) -> tuple[float, float]:
+    """(dx, dy) [m] to add to the estimated position for the offsets ``box_offsets`` measured."""
+    ox, oy = offsets
+    return (config.gain * ox if ox is not None else 0.0), (config.gain * oy if oy is not None else 0.0)
 
 
 def box_offsets(

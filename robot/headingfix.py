@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, box_offsets, edge_supported
+from robot.boxfix import BoxFixConfig, box_offsets, box_shift, edge_supported
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
@@ -66,9 +66,6 @@ class WallHeading:
         self.config = config
         # One row per fix: axis (0 = x, 1 = y), measured error (true - odometry) [m], odometry x, y [m].
         self._rows: list[tuple[int, float, float, float]] = []
-
-    def __len__(self) -> int:
-        return len(self._rows)
 
     def add(self, axis: int, error_m: float, odo_x: float, odo_y: float) -> None:
         """A position fix: along ``axis``, the true position minus the odometry-only position."""
@@ -165,8 +162,7 @@ class WallFixes:
                 self.heading.add(0, ox + pose.x - odo_x, odo_x, odo_y)
             if oy is not None:
                 self.heading.add(1, oy + pose.y - odo_y, odo_x, odo_y)
-        gain = self.box.gain
-        est = dr.shift_position(gain * ox if ox is not None else 0.0, gain * oy if oy is not None else 0.0)
+        est = dr.shift_position(*box_shift(self.box, (ox, oy)))
         if self.heading is not None and (fit := self.heading.fit()) is not None:
             est = dr.correct_heading(fit.delta_rad, fit.std_rad)
             self.heading.reset()

@@ -97,7 +97,7 @@ def simplify_trail(trail: list[list[Any]], end: list[Any] | None, tolerance_mm: 
             run.append(point)
             continue
         if run:
-            out += _simplify_run(run, tolerance_mm) if len(run) > 2 else run
+            out += _simplify_run(run, tolerance_mm)
             run = []
         if point is not None:
             out.append(point)
