@@ -79,6 +79,27 @@ def test_collision_stops_the_robot_at_the_wall() -> None:
     assert sim.read_encoders().left == before
 
 
+def test_a_body_against_a_wall_still_turns_on_the_spot() -> None:
+    # Unequal wheels nudge the centre while turning on the spot; against a wall that nudge must not
+    # wedge the robot for good (it did: every turn stalled, and exploration ended early).
+    noise = SimNoise.off().model_copy(update={"wheel_radius_error_left": 0.004, "wheel_radius_error_right": -0.004})
+    sim = SimRobot(box_world(x=6.0 - ROBOT.radius_m), ROBOT, noise)  # touching the wall at x = 6
+    pressed = sim.true_pose
+    collisions = sim.collisions
+    for sign in (-1.0, 1.0):  # turning clockwise first nudges the centre into the wall
+        before = sim.true_pose.theta
+        sim.set_wheel_speeds(-0.05 * sign, 0.05 * sign)
+        sim.sleep(2.0)
+        turned = math.remainder(sim.true_pose.theta - before, 2 * math.pi)
+        assert turned == pytest.approx(sign * 2.0 * 0.05 * 2.0 / ROBOT.wheel_base_m, rel=0.02)
+    assert sim.true_pose.x <= 6.0 - ROBOT.radius_m + 1e-12
+    assert sim.true_pose.x == pytest.approx(pressed.x, abs=1e-3)
+    assert sim.collisions >= collisions
+    sim.set_wheel_speeds(0.25, 0.25)  # driving on into the wall still stalls
+    sim.sleep(1.0)
+    assert sim.true_pose.x <= 6.0 - ROBOT.radius_m + 1e-12
+
+
 def test_collision_with_an_obstacle() -> None:
     world = box_world(obstacles=[{"shape": "circle", "center": [2.0, 2.0], "radius": 0.2}])
     sim = SimRobot(world, ROBOT, SimNoise.off())

@@ -186,9 +186,18 @@ class SimRobot:
                     clearance = _point_segment_distance(xs, ys, self._segments)
                     hit = np.flatnonzero(clearance < self.robot.radius_m)
                     if hit.size:
-                        ok = int(hit[0])  # the body stops at the last free tick; the wheels stall
+                        ok = int(hit[0])  # the body stops at the last free tick ...
                         self.collisions += ticks - ok
-                        rate[ok:] = 0.0
+                        if wl + wr == 0.0:
+                            # ... but a round body turning on the spot against a wall keeps turning
+                            # (its wheels scrub): only its centre, which unequal wheels or slip would
+                            # nudge into the wall, stays put.
+                            xs[ok:] = xs[ok - 1] if ok > 0 else self._x
+                            ys[ok:] = ys[ok - 1] if ok > 0 else self._y
+                            path[ok:] = path[ok - 1] if ok > 0 else 0.0
+                            ok = ticks
+                        else:
+                            rate[ok:] = 0.0  # ... and the wheels stall
             if ok > 0:
                 self._x, self._y = float(xs[ok - 1]), float(ys[ok - 1])
                 self._theta = math.atan2(math.sin(ths[ok - 1]), math.cos(ths[ok - 1]))
