@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,8 @@ class Explorer:
     stack: list[tuple[int, int]] = field(default_factory=list)
     inspections: dict[tuple[int, int], int] = field(default_factory=dict)  # map cell -> count
     given_up: set[tuple[int, int]] = field(default_factory=set)
+    max_escapes: int = 5  # times a robot boxed in by its own map may retry the cells it has stood in
+    escapes: int = 0
 
     def __post_init__(self) -> None:
         self.nav_rows = -(-self.grid.rows // self.block)
@@ -92,10 +95,14 @@ class Explorer:
         return ok & ~self.bumped
 
     # -- decisions -------------------------------------------------------------------------------
-    def _can_step(self, trav: NDArray[np.bool_], cell: tuple[int, int], d: tuple[int, int]) -> bool:
+    def _can_step(
+        self, trav: NDArray[np.bool_], cell: tuple[int, int], d: tuple[int, int], relaxed: bool = False
+    ) -> bool:
         r, c = cell[0] + d[0], cell[1] + d[1]
         if not (0 <= r < self.nav_rows and 0 <= c < self.nav_cols) or not trav[r, c]:
             return False
+        if relaxed and self.visited[cell] and self.visited[r, c]:
+            return True  # the robot has stood at both ends
         if d[0] != 0 and d[1] != 0:  # a diagonal needs both orthogonal neighbours clear
             return bool(trav[cell[0] + d[0], cell[1]] and trav[cell[0], cell[1] + d[1]])
         return True
@@ -172,6 +179,27 @@ class Explorer:
     ) -> Action:
         """Breadth-first search over traversable cells for the nearest useful goal."""
         front = self.frontier(states, passable, doubtful)
+        action, reached = self._search(current, trav, front, relaxed=False)
+        boxed_in = 2 * sum(1 for cell in reached if self.visited[cell]) < np.count_nonzero(self.visited)
+        if action is None and boxed_in and self.escapes < self.max_escapes:
+            # Cut off from most of where it has been: the map (a wall clipping the cells around, a
+            # bump) closes every way out. Cells the robot has stood in, and the straight moves
+            # between them, were passable once; retry them rather than end the run with the room
+            # half explored.
+            action, _ = self._search(current, trav | self.visited, front, relaxed=True)
+            if action is not None:
+                self.escapes += 1
+        if action is not None:
+            return action
+        # Nothing reachable is left to do: frontier cells nobody can get next to are given up.
+        self.given_up.update(zip(*np.nonzero(front), strict=True))
+        return Action("done", reason="complete")
+
+    def _search(
+        self, current: tuple[int, int], trav: NDArray[np.bool_], front: NDArray[np.bool_], relaxed: bool
+    ) -> tuple[Action | None, Iterable[tuple[int, int]]]:
+        """The first step towards the nearest goal (None when no goal is reachable), and the cells
+        the search reached."""
         inspect_spots = self._inspection_spots(front)
         stack_top = self.stack[-1] if self.stack else None
         parent: dict[tuple[int, int], tuple[int, int]] = {current: current}
@@ -186,21 +214,19 @@ class Explorer:
                     step = parent[step]
                 if cell == stack_top and step == cell:
                     self.stack.pop()
-                return Action("move", step, reason="revisit" if goal_here else "frontier")
+                return Action("move", step, reason="revisit" if goal_here else "frontier"), parent
             if inspect_here and cell == current:
                 target = inspect_spots[cell]
                 self.inspections[target] = self.inspections.get(target, 0) + 1
                 if self.inspections[target] >= self.max_inspections:
                     self.given_up.add(target)
-                return Action("inspect", heading_rad=self._heading_to(current, target), reason="frontier")
+                return Action("inspect", heading_rad=self._heading_to(current, target), reason="frontier"), parent
             for d in CLOCKWISE:
                 nxt = (cell[0] + d[0], cell[1] + d[1])
-                if nxt not in parent and self._can_step(trav, cell, d):
+                if nxt not in parent and self._can_step(trav, cell, d, relaxed):
                     parent[nxt] = cell
                     queue.append(nxt)
-        # Nothing reachable is left to do: frontier cells nobody can get next to are given up.
-        self.given_up.update(zip(*np.nonzero(front), strict=True))
-        return Action("done", reason="complete")
+        return None, parent
 
     def _inspection_spots(self, front: NDArray[np.bool_]) -> dict[tuple[int, int], tuple[int, int]]:
         """Navigation cells next to a frontier map cell, mapped to that cell."""

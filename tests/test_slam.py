@@ -18,7 +18,7 @@ from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame
 from robot.mapping.logodds import LogOddsMapper, LogOddsParams
 from robot.metrics import score
-from robot.runner import frame_for_world, simulate
+from robot.runner import RunResult, frame_for_world, simulate
 from robot.settings import load_run_config
 from robot.slam_config import SlamConfig
 from robot.truth import truth_grid
@@ -234,6 +234,42 @@ def test_a_dead_end_backtracks_to_the_cell_it_came_from() -> None:
     assert back.kind == "move" and back.target == (1, 1) and back.reason == "backtrack"
 
 
+def test_a_robot_boxed_in_by_its_own_map_retries_the_cells_it_has_stood_in() -> None:
+    # The robot explored into the corner (4, 0) from (3, 1); since then the map shows a wall
+    # clipping (3, 0) and (3, 1), and the move back east to (4, 1) bumped. Rows 0-2 are unexplored.
+    grid = GridSpec(0.0, 0.0, 0.2, 5, 5)
+    free = np.ones(grid.shape)
+    free[3, 0] = free[3, 1] = -1.0
+    states = np.where(free > 0, FREE, OCCUPIED).astype(np.int8)
+
+    def boxed_in(max_escapes: int) -> Explorer:
+        explorer = Explorer(grid, 1, (3, 1), max_escapes=max_escapes)
+        explorer.visited[3, 1] = explorer.visited[4, 1] = True
+        explorer.bumped[4, 1] = True
+        return explorer
+
+    explorer = boxed_in(max_escapes=5)
+    action = explorer.decide((4, 0), 0.0, states, free > 0, free)
+    assert action.kind == "move" and action.target == (3, 1) and explorer.escapes == 1
+    # Without escapes the same robot ends the run with most of the room unexplored.
+    assert boxed_in(max_escapes=0).decide((4, 0), 0.0, states, free > 0, free).kind == "done"
+    # Escapes are bounded: a robot that keeps bumping out of the corner ends in the end.
+    explorer = boxed_in(max_escapes=2)
+    actions = []
+    for _ in range(5):
+        action = explorer.decide((4, 0), 0.0, states, free > 0, free)
+        actions.append(action.kind)
+        if action.kind == "done":
+            break
+        explorer.bumped[action.target] = True  # the move failed; the robot is back in the corner
+    assert actions == ["move", "move", "done"] and explorer.escapes == 2
+    # A run that has simply finished, with every place it has been still in reach, does not escape.
+    done = Explorer(grid, 1, (0, 0))
+    done.visited[:, :] = True
+    done.bumped[0, 4] = True
+    assert done.decide((0, 0), 0.0, states, free > 0, free).kind == "done" and done.escapes == 0
+
+
 def test_config_refuses_settings_that_cannot_work() -> None:
     with pytest.raises(ConfigError, match="finer than the evidence grid"):
         load_run_config(None, {"resolution": 0.03})
@@ -397,15 +433,22 @@ def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
 
 def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
     """In a 7 x 6 m room most of the run is far from any wall: with heading fixes off, the gyro's
-    drift leaves the heading degrees off by the end (28 cm of position error on seed 0)."""
+    drift leaves the heading over a degree off by the end, and the position drifts with it (on
+    seed 0 the 90th percentile of the position error along the run is 6 cm, 2.6 cm with fixes)."""
     cfg = load_run_config()
     world = load_world("bigroom")
     with_fixes = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
     off = cfg.slam.model_copy(update={"heading_fix": cfg.slam.heading_fix.model_copy(update={"enabled": False})})
     without = simulate(world, cfg.robot, cfg.noise, off, seed=0)
     assert with_fixes.final_theta_error_deg < 1.0 < without.final_theta_error_deg
-    assert with_fixes.final_xy_error_m < 0.05 < without.final_xy_error_m
+    assert _position_error_p90(with_fixes) < 0.04 < _position_error_p90(without)
     assert with_fixes.metrics.f1 > without.metrics.f1
+
+
+def _position_error_p90(result: RunResult) -> float:
+    """The 90th percentile of the position error [m] over the run's trajectory."""
+    t = np.array(result.trajectory)
+    return float(np.percentile(np.hypot(t[:, 1] - t[:, 4], t[:, 2] - t[:, 5]), 90))
 
 
 def _evidence_with_solid(frame: MapFrame, solid_xy: list[tuple[float, float]]):
