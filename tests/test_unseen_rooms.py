@@ -1,0 +1,42 @@
+"""The room generator of benchmarks/unseen_rooms.py: valid worlds, reproducible, and their files load."""
+
+from __future__ import annotations
+
+import importlib.util
+import random
+from pathlib import Path
+
+from robot.world import load_world_text, world_from_dict
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "unseen_rooms.py"
+_SPEC = importlib.util.spec_from_file_location("unseen_rooms", _PATH)
+assert _SPEC is not None and _SPEC.loader is not None
+unseen_rooms = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(unseen_rooms)
+
+
+def _rooms(seed: int, count: int) -> list[dict]:
+    rng = random.Random(seed)
+    out: list[dict] = []
+    while len(out) < count:
+        data = unseen_rooms.random_world(rng, f"r{len(out)}")
+        if data is not None:
+            out.append(data)
+    return out
+
+
+def test_generated_rooms_are_valid_worlds_whose_files_load_the_same() -> None:
+    rooms = _rooms(3, 12)
+    kinds = {data["description"] for data in rooms}
+    assert any(k.endswith("polygon") for k in kinds) and len(kinds) >= 3
+    for data in rooms:
+        world = world_from_dict(data, "generated.toml")
+        again = load_world_text(unseen_rooms.to_toml(data), "generated.toml")
+        assert again.boundary.equals(world.boundary)
+        assert len(again.obstacles) == len(world.obstacles)
+        assert (again.start.x, again.start.y, again.start.theta) == (world.start.x, world.start.y, world.start.theta)
+
+
+def test_the_same_seed_gives_the_same_rooms() -> None:
+    assert _rooms(5, 4) == _rooms(5, 4)
+    assert _rooms(5, 4) != _rooms(6, 4)
