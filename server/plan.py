@@ -12,11 +12,12 @@ from numpy.typing import NDArray
 from pydantic import ValidationError
 
 from robot.config import RobotConfig, SimNoise
-from robot.errors import ConfigError
+from robot.errors import ConfigError, WorldError
 from robot.grid import GridSpec
 from robot.mapping.base import MapFrame
 from robot.runner import frame_for_unknown_room, frame_for_world
 from robot.settings import load_run_config
+from robot.sim.simulator import check_start
 from robot.slam_config import SlamConfig
 from robot.truth import truth_grid
 from robot.world import World
@@ -119,6 +120,10 @@ def validate_options(
     world_text: str | None = None
     if hardware == "sim":
         world = catalog.load(options["world"])
+        try:
+            check_start(world, robot)
+        except WorldError as exc:
+            raise field_error([*loc, "world"], str(exc)) from None
         world_text = catalog.text(options["world"])
         frame = frame_for_world(world, cfg.slam.resolution)
     else:

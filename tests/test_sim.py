@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from robot.config import RobotConfig, SimNoise, SonarModel
+from robot.errors import WorldError
 from robot.sim import SimRobot
 from robot.sim.sonar import cone_candidates, simulate_ranges
 from robot.world import world_from_dict
@@ -98,6 +99,12 @@ def test_a_body_against_a_wall_still_turns_on_the_spot() -> None:
     sim.set_wheel_speeds(0.25, 0.25)  # driving on into the wall still stalls
     sim.sleep(1.0)
     assert sim.true_pose.x <= 6.0 - ROBOT.radius_m + 1e-12
+
+
+def test_a_start_that_leaves_the_body_in_a_wall_is_refused() -> None:
+    with pytest.raises(WorldError, match=r"needs 6\.4 cm"):
+        SimRobot(box_world(x=0.03), ROBOT, SimNoise.off())
+    SimRobot(box_world(x=ROBOT.radius_m), ROBOT, SimNoise.off())  # touching is fine
 
 
 def test_collision_with_an_obstacle() -> None:

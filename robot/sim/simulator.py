@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from robot.config import RobotConfig, SimNoise
+from robot.errors import WorldError
 from robot.hardware import EncoderCounts, ImuSample, SonarSweep
 from robot.sim.sonar import cone_candidates, ray_blocked, simulate_ranges
 from robot.world import Pose, World
@@ -33,6 +34,17 @@ def _point_segment_distance(
     return np.hypot(rx - t * dx, ry - t * dy).min(axis=1)
 
 
+def check_start(world: World, robot: RobotConfig) -> None:
+    """Refuse a world whose start leaves the robot's body overlapping a wall or an obstacle: such a
+    robot could never move, and the run would end at once with nothing mapped."""
+    clearance = float(_point_segment_distance(np.array([world.start.x]), np.array([world.start.y]), world.segments)[0])
+    if clearance < robot.radius_m - 1e-9:
+        raise WorldError(
+            f"{world.name}: start ({world.start.x:g}, {world.start.y:g}) is {100 * clearance:.1f} cm from a wall "
+            f"or obstacle, but the robot's body needs {100 * robot.radius_m:.1f} cm (its radius)"
+        )
+
+
 class SimRobot:
     """The simulated robot. ``speed`` paces the clock against wall time (None runs flat out)."""
 
@@ -44,6 +56,7 @@ class SimRobot:
         seed: int = 0,
         speed: float | None = None,
     ) -> None:
+        check_start(world, robot)
         self.world = world
         self.robot = robot
         self.noise = noise

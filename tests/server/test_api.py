@@ -77,6 +77,15 @@ def test_worlds_list_and_upload(api: httpx.Client) -> None:
     assert ended["status"] == "finished" and ended["grid"]["rows"] == 10
 
 
+def test_a_world_whose_start_leaves_the_robot_in_a_wall_cannot_be_run(api: httpx.Client) -> None:
+    # A valid world file, but the robot's body (6.4 cm radius) would overlap the wall at y = 0.
+    squeezed = TINY_WORLD.replace('name = "tiny"', 'name = "squeezed"').replace("y = 0.5", "y = 0.03")
+    assert api.post("/api/worlds", files={"file": ("s.toml", squeezed, "application/toml")}).status_code == 201
+    run = api.post("/api/runs", json={**FAST, "world": "squeezed"})
+    assert run.status_code == 422 and field_of(run) == ["body", "world"]
+    assert "radius" in run.text
+
+
 @pytest.mark.parametrize(
     ("content", "status", "needle"),
     [
