@@ -168,13 +168,17 @@ class SlamEngine:
                 self.pilot.drive_to(x, y)
 
     def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
-        self._belief = self.mapper.states()
+        belief = self.mapper.states()
+        if not np.array_equal(belief, self._belief):
+            # The time limit runs from the last change of what the robot knows, not of the exported
+            # map: in a large hall the area explored beyond a strip not yet seen free to the end is
+            # grey in the export (not reachable from the start) while the robot maps it.
+            self.stats.last_change_t = self.hw.now()
+        self._belief = belief
         self._free_fraction = self.mapper.free_fraction()
         self._passable = self._free_fraction >= self.explorer.min_free_fraction
         exported = classify(self._belief, self.frame.start_cell)
         changed = np.nonzero(exported != self._exported)
-        if changed[0].size:
-            self.stats.last_change_t = self.hw.now()
         self._exported = exported
         frontier = int(self.explorer.frontier(self._belief, self._passable).sum())
         return StepResult(
