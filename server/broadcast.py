@@ -144,6 +144,27 @@ def merge(items: list[Outgoing]) -> Outgoing:
     return Outgoing(merge_steps([i.data for i in items]), merged=True, wall_time=items[-1].wall_time)
 
 
+class Ticker:
+    """A clock whose ticks a run's viewers wait for together: one timer and one event per tick for them
+    all, rather than a timer each (with 50 viewers at 25 ticks a second, the loop's wake-ups add up)."""
+
+    def __init__(self) -> None:
+        self._tick = 0  # the latest tick waited for, as a count of intervals on the loop's clock
+        self._event = asyncio.Event()
+
+    async def wait(self, interval_s: float) -> None:
+        """Until the next multiple of ``interval_s`` on the loop's clock."""
+        loop = asyncio.get_running_loop()
+        tick = int(loop.time() // interval_s) + 1
+        if self._event.is_set() and tick <= self._tick:
+            tick = self._tick + 1  # the loop may run a timer a hair early: that tick has been served
+        if tick != self._tick:
+            self._tick = tick
+            self._event = asyncio.Event()
+            loop.call_at(tick * interval_s, self._event.set)
+        await self._event.wait()
+
+
 @dataclass(eq=False)  # compared and hashed by identity: a viewer is a viewer
 class Subscriber:
     """A viewer's queue. Only the event loop touches it; ``put`` never waits."""

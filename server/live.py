@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from robot.config import RobotConfig
 from robot.grid import GridSpec
-from server.broadcast import TERMINAL_EVENTS, Broadcaster, Outgoing, Subscriber
+from server.broadcast import TERMINAL_EVENTS, Broadcaster, Outgoing, Subscriber, Ticker
 from server.wire import VIEW_FIELDS, apply_step, trail_wire, view_from_checkpoint
 
 GREY = 2  # wire code of an unknown / inaccessible cell; white 0 and black 1 match the map states
@@ -77,6 +77,7 @@ class LiveRun:
         self.trail: deque[list[int | None]] = deque(maxlen=TRAIL_LENGTH)  # [x mm, y mm] after every step
         self.terminal: Outgoing | None = None
         self.broadcaster = Broadcaster()
+        self.ticker = Ticker()  # paces the viewers of a fast run together
         self._snapshot: Outgoing | None = None  # encoded once for every viewer that joins until the next change
         self._last_progress = 0.0
 

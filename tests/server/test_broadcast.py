@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import json
 from typing import Any
@@ -14,6 +15,7 @@ from server.broadcast import (
     Broadcaster,
     Outgoing,
     Subscriber,
+    Ticker,
     _off_segment_mm,
     merge_steps,
     simplify_trail,
@@ -107,19 +109,60 @@ def test_a_closed_or_slow_viewer_does_not_affect_the_others() -> None:
     assert [m["seq"] for m in drain(fast)] == list(range(1, 101))
 
 
-def test_viewers_that_keep_pace_share_one_merged_message() -> None:
+def hub_of(*viewers: Subscriber) -> Broadcaster:
     hub = Broadcaster()
-    a, b = Subscriber(100), Subscriber(100)
-    hub.add(a)
-    hub.add(b)
-    for seq in range(1, 5):
+    for sub in viewers:
+        hub.add(sub)
+    return hub
+
+
+def publish_steps(hub: Broadcaster, seqs: range) -> None:
+    """Steps that each change one cell of their own: row ``seq``."""
+    for seq in seqs:
         hub.publish(Outgoing.of(step(seq, [[seq, 0, 1]])))
+
+
+def test_viewers_that_keep_pace_share_one_merged_message() -> None:
+    a, b = Subscriber(100), Subscriber(100)
+    publish_steps(hub_of(a, b), range(1, 5))
     first_a, first_b = a.items.popleft(), b.items.popleft()
     merged_a, merged_b = a.fold(first_a), b.fold(first_b)
     assert merged_a is merged_b  # merged and encoded once
     assert merged_a.data["seq"] == 4 and merged_a.data["merged"] == 4
     assert '"merged":4' in merged_a.wire()
     assert not a.items and not b.items
+
+
+def test_viewers_waiting_for_the_same_tick_share_one_timer_and_each_tick_serves_once() -> None:
+    async def run() -> list[float]:
+        loop = asyncio.get_running_loop()
+        timers: list[float] = []
+        call_at = loop.call_at
+
+        def counting_call_at(when: float, *args: Any) -> asyncio.TimerHandle:
+            timers.append(when)
+            return call_at(when, *args)
+
+        loop.call_at = counting_call_at  # type: ignore[method-assign]
+        ticker = Ticker()
+        await ticker.wait(0.05)  # just past a tick: the next one is a whole interval away
+        await asyncio.gather(*(ticker.wait(0.05) for _ in range(20)))  # twenty viewers, one timer
+        assert len(timers) == 2 and timers[0] < timers[1]
+        # A timer may run a hair before its time: a viewer that comes back in what still looks like
+        # the tick it was woken for waits for the next one.
+        early = asyncio.create_task(ticker.wait(1000.0))
+        await asyncio.sleep(0)
+        ticker._event.set()  # as if the loop ran the tick's timer early: its clock is short of the tick
+        await early
+        again = asyncio.create_task(ticker.wait(1000.0))
+        await asyncio.sleep(0)
+        done = again.done()
+        again.cancel()
+        assert not done
+        return timers
+
+    timers = run_async(run())
+    assert len(timers) == 4 and timers[3] == timers[2] + 1000.0
 
 
 def test_a_merged_step_carries_the_latest_value_of_every_field_that_any_merged_step_carried() -> None:
