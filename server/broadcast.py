@@ -31,14 +31,14 @@ class Outgoing:
     merged: bool = False  # data changed since text was made
     wall_time: float | None = None
     _timed: str | None = None
+    kind: str = field(init=False)  # the message's type, asked for several times per viewer and message
+
+    def __post_init__(self) -> None:
+        self.kind = str(self.data["type"])
 
     @classmethod
     def of(cls, data: dict[str, Any], text: str | None = None, wall_time: float | None = None) -> Outgoing:
         return cls(data, text if text is not None else encode(data), wall_time=wall_time)
-
-    @property
-    def kind(self) -> str:
-        return str(self.data["type"])
 
     @property
     def terminal(self) -> bool:
@@ -195,12 +195,15 @@ class Subscriber:
     def fold(self, first: Outgoing) -> Outgoing:
         """``first`` (a step about to be sent) merged with the steps queued right behind it."""
         steps = [first]
+        shareable = self.shared is not None and "merged" not in first.data  # not a viewer's own merge
         while self.items and self.items[0].kind == "step":
-            steps.append(self.items.popleft())
+            step = self.items.popleft()
+            steps.append(step)
+            shareable = shareable and "merged" not in step.data
         if len(steps) == 1:
             return first
         self.merges += 1
-        if self.shared is None or any("merged" in s.data for s in steps):
+        if not shareable or self.shared is None:
             return merge(steps)
         # Viewers that keep pace fold the same steps: merge and encode them once for all.
         key = (steps[0].data["seq"], steps[-1].data["seq"])

@@ -133,6 +133,18 @@ def test_viewers_that_keep_pace_share_one_merged_message() -> None:
     assert not a.items and not b.items
 
 
+def test_a_viewer_whose_own_queue_was_merged_does_not_take_the_shared_message() -> None:
+    behind, keeping_pace = Subscriber(3), Subscriber(100)
+    hub = hub_of(behind, keeping_pace)
+    publish_steps(hub, range(1, 4))
+    keeping_pace.fold(keeping_pace.items.popleft())  # steps 1-3 sent
+    publish_steps(hub, range(4, 6))  # behind's queue overflows: steps 1-4 are folded into one
+    ours = keeping_pace.fold(keeping_pace.items.popleft())  # steps 4-5
+    theirs = behind.fold(behind.items.popleft())  # steps 1-5, though it too ends in steps 4 and 5
+    assert ours.data["merged"] == 2 and theirs.data["merged"] == 5
+    assert [c[0] for c in theirs.data["cells"]] == [1, 2, 3, 4, 5]
+
+
 def test_viewers_waiting_for_the_same_tick_share_one_timer_and_each_tick_serves_once() -> None:
     async def run() -> list[float]:
         loop = asyncio.get_running_loop()
