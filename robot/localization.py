@@ -62,6 +62,11 @@ class DeadReckoning:
         kf.P = np.diag([1e-8, 1e-4, cfg.initial_bias_std_rad_s**2])
         kf.H = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
         self._H_still = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
+        # Filled in place at every tick (dt and the measurement variances change; the layout does not).
+        kf.F = np.eye(3)
+        kf.Q = np.zeros((3, 3))
+        self._R2 = np.zeros((2, 2))
+        self._z2 = np.zeros(2)
         self._x = start.x
         self._y = start.y
         self._odo_x = start.x  # the same, without external position fixes
@@ -128,10 +133,11 @@ class DeadReckoning:
         theta_before = float(kf.x[0])
         # omega is the mean yaw rate over the tick; it may jump at the tick's start (a new wheel
         # command), and the heading integrates the new value over the whole tick.
-        kf.F = np.array([[1.0, dt, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        kf.F[0, 1] = dt
         qw = cfg.yaw_rate_jump_std_rad_s**2
-        qb = cfg.bias_walk_std_rad_s2**2 * dt
-        kf.Q = np.array([[qw * dt * dt, qw * dt, 0.0], [qw * dt, qw, 0.0], [0.0, 0.0, qb]])
+        q = kf.Q
+        q[0, 0], q[0, 1], q[1, 0], q[1, 1] = qw * dt * dt, qw * dt, qw * dt, qw
+        q[2, 2] = cfg.bias_walk_std_rad_s2**2 * dt
         kf.predict()
 
         enc_rate = (dr - dl) / self.robot.wheel_base_m / dt
@@ -143,18 +149,21 @@ class DeadReckoning:
             gyro_rate = float(np.mean([s.gyro_z_rad_s for s in imu]))
             gyro_var = cfg.gyro_noise_std_rad_s**2 / len(imu)
             still = dl_counts == 0 and dr_counts == 0 and not wheels_commanded
+            z, r = self._z2, self._R2
             if still:
                 # Zero-rate pseudo-measurement and the gyro together: the gyro then reads the bias.
-                kf.update(
-                    np.array([gyro_rate, 0.0]), R=np.diag([gyro_var, cfg.zero_rate_std_rad_s**2]), H=self._H_still
-                )
+                z[0], z[1] = gyro_rate, 0.0
+                r[0, 0], r[1, 1] = gyro_var, cfg.zero_rate_std_rad_s**2
+                kf.update(z, R=r, H=self._H_still)
             else:
                 innovation = gyro_rate - float(kf.x[2]) - enc_rate
                 gate = cfg.slip_gate_sigma * math.sqrt(enc_var + gyro_var + float(kf.P[2, 2]))
                 if abs(innovation) > gate:
                     enc_var *= cfg.slip_inflation
                     self.slip_events += 1
-                kf.update(np.array([gyro_rate, enc_rate]), R=np.diag([gyro_var, enc_var]))
+                z[0], z[1] = gyro_rate, enc_rate
+                r[0, 0], r[1, 1] = gyro_var, enc_var
+                kf.update(z, R=r)
         else:
             kf.update(np.array([enc_rate]), R=np.array([[enc_var]]), H=kf.H[1:2])
         # Position: encoder distance along the mid-tick fused heading.
