@@ -73,22 +73,6 @@ def edge_supported(
     return bool(np.mean(np.any(solid, axis=1)) >= config.edge_support)
 
 
-def box_fix(
-    frame: MapFrame,
-    robot: RobotConfig,
-    pose: Pose,
-    ranges_m: NDArray[np.float64],
-    config: BoxFixConfig,
-    evidence: Evidence | None = None,
-) -> tuple[float, float]:
-    """(dx, dy) [m] to add to the estimated position, from echoes off the room box's walls.
-
-    With ``evidence`` (the map so far), a reading counts only where the map already shows the box
-    edge as a wall across the beam's footprint.
-    """
-    return box_shift(config, box_offsets(frame, robot, pose, ranges_m, config, evidence))
-
-
 def box_shift(config: BoxFixConfig, offsets: tuple[float | None, float | None]) -> tuple[float, float]:
     """(dx, dy) [m] to add to the estimated position for the offsets ``box_offsets`` measured."""
     ox, oy = offsets
@@ -104,7 +88,11 @@ def box_offsets(
     evidence: Evidence | None = None,
 ) -> tuple[float | None, float | None]:
     """The position error (true minus estimated) [m] along x and along y that the box's walls show
-    in one sweep (the median over the beams that count), or None for an axis no beam measured."""
+    in one sweep (the median over the beams that count), or None for an axis no beam measured.
+
+    With ``evidence`` (the map so far), a reading counts only where the map already shows the box
+    edge as a wall across the beam's footprint.
+    """
     if frame.extent is None or not config.enabled:
         return None, None
     min_x, min_y, max_x, max_y = frame.extent

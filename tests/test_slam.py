@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from robot.boxfix import box_offsets, box_shift
 from robot.config import RobotConfig, SimNoise
 from robot.engine import SlamEngine, classify
 from robot.errors import ConfigError
@@ -328,7 +329,7 @@ def test_stopping_early_keeps_the_partial_map() -> None:
 
 # -- position fixes from the room box ----------------------------------------------------------
 def test_a_head_on_echo_off_a_box_wall_pulls_the_position_towards_the_truth() -> None:
-    from robot.boxfix import BoxFixConfig, box_fix
+    from robot.boxfix import BoxFixConfig
 
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
@@ -336,23 +337,23 @@ def test_a_head_on_echo_off_a_box_wall_pulls_the_position_towards_the_truth() ->
     believed = Pose(true_x + 0.04, 1.0, 0.0)  # dead reckoning is 4 cm too far east
     ranges = np.full(8, ROBOT.sonar.max_range_m)
     ranges[0] = 2.0 - true_x - ROBOT.sonars[0].offset_x_m  # the east wall, head on
-    dx, dy = box_fix(frame, ROBOT, believed, ranges, BoxFixConfig(gain=1.0))
+    dx, dy = _box_fix(frame, ROBOT, believed, ranges, BoxFixConfig(gain=1.0))
     assert dx == pytest.approx(-0.04, abs=1e-9)
     assert dy == 0.0
 
 
 def test_box_fixes_ignore_glancing_far_or_implausible_echoes_and_unknown_rooms() -> None:
-    from robot.boxfix import BoxFixConfig, box_fix
+    from robot.boxfix import BoxFixConfig
 
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
     ranges = np.full(8, ROBOT.sonar.max_range_m)
     ranges[0] = 0.5  # implies a wall at x = 1.56: furniture, not the box's wall
-    assert box_fix(frame, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
+    assert _box_fix(frame, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
     ranges[0] = 2.0 - 1.0 - ROBOT.sonars[0].offset_x_m
-    assert box_fix(frame, ROBOT, Pose(1.0, 1.0, math.radians(10)), ranges, BoxFixConfig()) == (0.0, 0.0)
+    assert _box_fix(frame, ROBOT, Pose(1.0, 1.0, math.radians(10)), ranges, BoxFixConfig()) == (0.0, 0.0)
     unknown = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=None)
-    assert box_fix(unknown, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
+    assert _box_fix(unknown, ROBOT, Pose(1.0, 1.0, 0.0), ranges, BoxFixConfig()) == (0.0, 0.0)
 
 
 def test_position_fixes_that_drift_across_the_travel_reveal_the_heading_error() -> None:
@@ -445,6 +446,11 @@ def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
     assert with_fixes.metrics.f1 > without.metrics.f1
 
 
+def _box_fix(frame: MapFrame, robot: RobotConfig, pose: Pose, ranges, config, evidence=None) -> tuple[float, float]:
+    """The position shift one sweep's box fixes make, as ``WallFixes.apply`` applies it."""
+    return box_shift(config, box_offsets(frame, robot, pose, ranges, config, evidence))
+
+
 def _position_error_p90(result: RunResult) -> float:
     """The 90th percentile of the position error [m] over the run's trajectory."""
     t = np.array(result.trajectory)
@@ -465,7 +471,7 @@ def _evidence_with_solid(frame: MapFrame, solid_xy: list[tuple[float, float]]):
 def test_box_fixes_need_the_map_to_show_the_box_edge_as_a_wall() -> None:
     """In a room that is not a rectangle, a corner can touch the box edge at one point: an echo from
     near it must not count until the map shows a wall along the edge across the beam's footprint."""
-    from robot.boxfix import BoxFixConfig, box_fix
+    from robot.boxfix import BoxFixConfig
 
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
@@ -477,9 +483,9 @@ def test_box_fixes_need_the_map_to_show_the_box_edge_as_a_wall() -> None:
     wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in ys])  # a wall just past the edge
     corner = _evidence_with_solid(frame, [(2.02, 1.0), (1.95, 0.9), (1.95, 1.1), (1.85, 0.8), (1.85, 1.2)])
     empty = _evidence_with_solid(frame, [])
-    assert box_fix(frame, ROBOT, believed, ranges, config, wall)[0] == pytest.approx(-0.04, abs=1e-9)
-    assert box_fix(frame, ROBOT, believed, ranges, config, corner) == (0.0, 0.0)
-    assert box_fix(frame, ROBOT, believed, ranges, config, empty) == (0.0, 0.0)
+    assert _box_fix(frame, ROBOT, believed, ranges, config, wall)[0] == pytest.approx(-0.04, abs=1e-9)
+    assert _box_fix(frame, ROBOT, believed, ranges, config, corner) == (0.0, 0.0)
+    assert _box_fix(frame, ROBOT, believed, ranges, config, empty) == (0.0, 0.0)
 
 
 def test_an_occupied_cell_between_the_explored_area_and_unknown_space_gets_a_closer_look() -> None:
