@@ -180,8 +180,7 @@ class Explorer:
         """Breadth-first search over traversable cells for the nearest useful goal."""
         front = self.frontier(states, passable, doubtful)
         action, reached = self._search(current, trav, front, relaxed=False)
-        boxed_in = 2 * sum(1 for cell in reached if self.visited[cell]) < np.count_nonzero(self.visited)
-        if action is None and boxed_in and self.escapes < self.max_escapes:
+        if action is None and self.escapes < self.max_escapes and self._cut_off(reached):
             # Cut off from most of where it has been: the map (a wall clipping the cells around, a
             # bump) closes every way out. Cells the robot has stood in, and the straight moves
             # between them, were passable once; retry them rather than end the run with the room
@@ -194,6 +193,10 @@ class Explorer:
         # Nothing reachable is left to do: frontier cells nobody can get next to are given up.
         self.given_up.update(zip(*np.nonzero(front), strict=True))
         return Action("done", reason="complete")
+
+    def _cut_off(self, reached: Iterable[tuple[int, int]]) -> bool:
+        """Whether a search reached fewer than half of the cells the robot has stood in."""
+        return bool(2 * sum(1 for cell in reached if self.visited[cell]) < np.count_nonzero(self.visited))
 
     def _search(
         self, current: tuple[int, int], trav: NDArray[np.bool_], front: NDArray[np.bool_], relaxed: bool
