@@ -7,7 +7,7 @@ default settings and noise; prints each room's scores and the spread over all of
 change can be checked against rooms it was not made for, and a failure (a run that ends early,
 a large pose error) shows up with the world file that reproduces it (``--out DIR`` keeps them).
 
-    python benchmarks/unseen_rooms.py [--rooms 32] [--seed 1] [--out DIR]
+    python benchmarks/unseen_rooms.py [--rooms 32] [--seed 1] [--out DIR] [--config FILE]
 """
 
 from __future__ import annotations
@@ -147,9 +147,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rooms", type=int, default=32, help="how many rooms (default 32)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the room generator (default 1)")
     parser.add_argument("--out", type=Path, default=None, help="keep each room's world file here")
+    parser.add_argument("--config", type=Path, default=None, help="a settings file, as `sonarslam run --config`")
     args = parser.parse_args(argv)
     rng = random.Random(args.seed)
-    cfg = load_run_config()
+    try:
+        cfg = load_run_config(args.config)
+    except SonarSlamError as exc:
+        parser.error(str(exc))
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
     print(f"{'room':<22s} {'F1':>6s} {'recall':>6s} {'steps':>6s} {'ended by':<11s} {'xy cm':>6s} {'deg':>5s}")

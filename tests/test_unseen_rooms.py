@@ -40,3 +40,17 @@ def test_generated_rooms_are_valid_worlds_whose_files_load_the_same() -> None:
 def test_the_same_seed_gives_the_same_rooms() -> None:
     assert _rooms(5, 4) == _rooms(5, 4)
     assert _rooms(5, 4) != _rooms(6, 4)
+
+
+def test_a_bad_settings_file_is_refused_in_one_line(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[slam.box_fix]\nenabled = 3\n")
+    for path in (bad, tmp_path / "missing.toml"):
+        try:
+            unseen_rooms.main(["--rooms", "1", "--config", str(path)])
+        except SystemExit as exc:
+            assert exc.code == 2
+        else:
+            raise AssertionError("a bad settings file ran")
+        err = capsys.readouterr().err.strip().splitlines()
+        assert str(path) in err[-1] and "Traceback" not in "\n".join(err)
