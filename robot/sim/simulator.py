@@ -20,24 +20,30 @@ from robot.sim.sonar import cone_candidates, ray_blocked, simulate_ranges
 from robot.world import Pose, World
 
 
-def _point_segment_distance(
-    px: NDArray[np.float64], py: NDArray[np.float64], segs: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """Distance (K,) from each point to the nearest of the segments (S, 4)."""
-    ax = segs[None, :, 0]
-    ay = segs[None, :, 1]
-    dx = segs[None, :, 2] - ax
-    dy = segs[None, :, 3] - ay
-    rx = px[:, None] - ax
-    ry = py[:, None] - ay
-    t = np.clip((rx * dx + ry * dy) / np.maximum(dx * dx + dy * dy, 1e-18), 0.0, 1.0)
-    return np.hypot(rx - t * dx, ry - t * dy).min(axis=1)
+class SegmentDistance:
+    """Distance from points to the nearest of fixed segments (S, 4); the per-segment terms are
+    computed once (the simulator asks after every move)."""
+
+    def __init__(self, segs: NDArray[np.float64]) -> None:
+        self._ax = segs[None, :, 0]
+        self._ay = segs[None, :, 1]
+        self._dx = segs[None, :, 2] - self._ax
+        self._dy = segs[None, :, 3] - self._ay
+        self._len2 = np.maximum(self._dx * self._dx + self._dy * self._dy, 1e-18)
+
+    def __call__(self, px: NDArray[np.float64], py: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance (K,) from each point to the nearest segment."""
+        dx, dy = self._dx, self._dy
+        rx = px[:, None] - self._ax
+        ry = py[:, None] - self._ay
+        t = np.minimum(np.maximum((rx * dx + ry * dy) / self._len2, 0.0), 1.0)
+        return np.hypot(rx - t * dx, ry - t * dy).min(axis=1)
 
 
 def check_start(world: World, robot: RobotConfig) -> None:
     """Refuse a world whose start leaves the robot's body overlapping a wall or an obstacle: such a
     robot could never move, and the run would end at once with nothing mapped."""
-    clearance = float(_point_segment_distance(np.array([world.start.x]), np.array([world.start.y]), world.segments)[0])
+    clearance = float(SegmentDistance(world.segments)(np.array([world.start.x]), np.array([world.start.y]))[0])
     if clearance < robot.radius_m - 1e-9:
         raise WorldError(
             f"{world.name}: start ({world.start.x:g}, {world.start.y:g}) is {100 * clearance:.1f} cm from a wall "
@@ -63,13 +69,16 @@ class SimRobot:
         self.speed = speed
         self._rng = np.random.default_rng(seed)
         self._segments = world.segments
+        self._clearance = SegmentDistance(world.segments)
         self._dt = 1.0 / robot.imu.rate_hz  # physics tick = IMU period [s]
         self._t = 0.0  # sim clock [s]
         self._x, self._y, self._theta = world.start.x, world.start.y, world.start.theta
         self._cmd = (0.0, 0.0)  # commanded rim speeds [m/s]
-        self._wheel_angle = np.zeros(2)  # left, right [rad], cumulative
-        self._radius_true = robot.wheel_radius_m * np.array(
-            [1.0 + noise.wheel_radius_error_left, 1.0 + noise.wheel_radius_error_right]
+        self._wheel_angle_l = 0.0  # [rad], cumulative
+        self._wheel_angle_r = 0.0
+        self._radius_true = (
+            robot.wheel_radius_m * (1.0 + noise.wheel_radius_error_left),
+            robot.wheel_radius_m * (1.0 + noise.wheel_radius_error_right),
         )
         self._gyro_bias = noise.gyro_bias_rad_s
         self._imu_t: list[NDArray[np.floating]] = []
@@ -104,17 +113,23 @@ class SimRobot:
         self._closed = True
 
     def read_encoders(self) -> EncoderCounts:
-        counts = np.floor(self._wheel_angle / (2.0 * math.pi) * self.robot.encoder_counts_per_rev)
-        return EncoderCounts(self._t, int(counts[0]), int(counts[1]))
+        per_rev = self.robot.encoder_counts_per_rev
+        return EncoderCounts(
+            self._t,
+            math.floor(self._wheel_angle_l / (2.0 * math.pi) * per_rev),
+            math.floor(self._wheel_angle_r / (2.0 * math.pi) * per_rev),
+        )
 
     def read_imu(self) -> list[ImuSample]:
         if not self._imu_t:
             return []
-        ts = np.concatenate(self._imu_t)
-        ws = np.concatenate(self._imu_w)
+        if len(self._imu_t) == 1:
+            ts, ws = self._imu_t[0], self._imu_w[0]
+        else:
+            ts, ws = np.concatenate(self._imu_t), np.concatenate(self._imu_w)
         self._imu_t.clear()
         self._imu_w.clear()
-        return [ImuSample(t, w) for t, w in zip(ts.tolist(), ws.tolist(), strict=True)]
+        return list(map(ImuSample, ts.tolist(), ws.tolist()))
 
     def read_sonar_sweep(self) -> SonarSweep:
         n = len(self.robot.sonars)
@@ -170,33 +185,38 @@ class SimRobot:
 
     def _advance(self, ticks: int, dt: float) -> None:
         noise = self.noise
-        rng = self._rng
         wl, wr = self._cmd[0] / self.robot.wheel_radius_m, self._cmd[1] / self.robot.wheel_radius_m  # [rad/s]
         # One batch of random numbers per call: slip for both wheels, gyro bias walk, gyro noise.
-        draws = rng.standard_normal((ticks, 4))
-        rate = np.zeros(ticks)
+        draws = self._rng.standard_normal((ticks, 4))
+        rate: NDArray[np.float64] | float = 0.0
         if wl != 0.0 or wr != 0.0:
-            rl, rr = float(self._radius_true[0]), float(self._radius_true[1])
+            rl, rr = self._radius_true
             slip = noise.wheel_slip_std
             gl = wl * dt * rl * (1.0 + slip * draws[:, 0])  # ground travel of each wheel per tick [m]
             gr = wr * dt * rr * (1.0 + slip * draws[:, 1])
             ds = 0.5 * (gl + gr)
             dth = (gr - gl) / self.robot.wheel_base_m
-            # Running sums from the current pose, tick after tick (cumsum adds in order, as a loop would).
-            ths = np.cumsum(np.concatenate(([self._theta], dth)))
+            # Running sums from the current pose, tick after tick (accumulate adds in order, as a loop
+            # would), each in a buffer that starts with the current value.
+            run = np.empty((3, ticks + 1))
+            run[:, 0] = self._theta, self._x, self._y
+            run[0, 1:] = dth
+            ths = np.add.accumulate(run[0])
             mid = ths[:-1] + 0.5 * dth
-            xs = np.cumsum(np.concatenate(([self._x], ds * np.cos(mid))))[1:]
-            ys = np.cumsum(np.concatenate(([self._y], ds * np.sin(mid))))[1:]
+            np.multiply(ds, np.cos(mid), out=run[1, 1:])
+            np.multiply(ds, np.sin(mid), out=run[2, 1:])
+            xs = np.add.accumulate(run[1])[1:]
+            ys = np.add.accumulate(run[2])[1:]
             ths = ths[1:]
-            rate = dth / dt
-            path = np.cumsum(np.abs(ds))
+            rate = wheel_rate = dth / dt
+            path = np.add.accumulate(np.abs(ds))
             ok = ticks
             if path[-1] > 0.0:
                 # Every tick lies within the path length of the end point, so a clear end point with
                 # that much to spare rules out a collision without checking each tick.
-                end_clear = _point_segment_distance(xs[-1:], ys[-1:], self._segments)[0]
+                end_clear = self._clearance(xs[-1:], ys[-1:])[0]
                 if end_clear < self.robot.radius_m + path[-1]:
-                    clearance = _point_segment_distance(xs, ys, self._segments)
+                    clearance = self._clearance(xs, ys)
                     hit = np.flatnonzero(clearance < self.robot.radius_m)
                     if hit.size:
                         ok = int(hit[0])  # the body stops at the last free tick ...
@@ -210,14 +230,16 @@ class SimRobot:
                             path[ok:] = path[ok - 1] if ok > 0 else 0.0
                             ok = ticks
                         else:
-                            rate[ok:] = 0.0  # ... and the wheels stall
+                            wheel_rate[ok:] = 0.0  # ... and the wheels stall
             if ok > 0:
                 self._x, self._y = float(xs[ok - 1]), float(ys[ok - 1])
-                self._theta = math.atan2(math.sin(ths[ok - 1]), math.cos(ths[ok - 1]))
-                self._wheel_angle += np.array([wl, wr]) * dt * ok
+                th = float(ths[ok - 1])
+                self._theta = math.atan2(math.sin(th), math.cos(th))
+                self._wheel_angle_l += wl * dt * ok
+                self._wheel_angle_r += wr * dt * ok
                 self.odometer_m += float(path[ok - 1])
         # Gyro: true yaw rate + slowly wandering bias + white noise, one sample per tick.
-        bias = self._gyro_bias + np.cumsum(noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * draws[:, 2])
+        bias = self._gyro_bias + np.add.accumulate(noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * draws[:, 2])
         self._gyro_bias = float(bias[-1])
         self._imu_t.append(self._t + dt * np.arange(1, ticks + 1))
         self._imu_w.append(rate + bias + noise.gyro_noise_std_rad_s * draws[:, 3])
