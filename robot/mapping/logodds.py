@@ -152,6 +152,9 @@ class LogOddsMapper:
         self._logodds_cache: NDArray[np.float32] | None = None
         self._fine_cache: NDArray[np.int8] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
+        # Evidence cell centres: x per column, y per row (GridSpec.index_to_world).
+        self._centre_x = self.fine.index_to_world(0, np.arange(self.fine.cols))[0]
+        self._centre_y = self.fine.index_to_world(np.arange(self.fine.rows), 0)[1]
         self._outside = blocked_by_extent(frame)
         # Evidence cells reaching past the surveyed room box (the padding included): its wall is there.
         self._beyond_box = np.zeros(self.fine.rows * self.fine.cols, dtype=bool)
@@ -361,22 +364,24 @@ class LogOddsMapper:
             behind[np.flatnonzero(hit)[central], np.flatnonzero(central)] = False
             free[own] &= ~np.any(behind, axis=1)
 
-    def _disk(self, x: float, y: float, radius: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    def _disk(self, x: float, y: float, radius: float) -> tuple[slice, slice, NDArray[np.bool_]]:
+        """The evidence cells whose centres lie within ``radius`` of (x, y): a box of them and a mask."""
         f = self.fine
-        r0, c0 = f.world_to_index(x + radius, y + radius)
-        r1, c1 = f.world_to_index(x - radius, y - radius)
-        rows = np.arange(max(int(r0), 0), min(int(r1), f.rows - 1) + 1)
-        cols = np.arange(max(int(c1), 0), min(int(c0), f.cols - 1) + 1)
-        if rows.size == 0 or cols.size == 0:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        cx, cy = f.index_to_world(rows[:, None], cols[None, :])
-        ri, ci = np.nonzero(np.hypot(cx - x, cy - y) <= radius)
-        return rows[ri], cols[ci]
+        # GridSpec.world_to_index, on plain floats.
+        c0 = math.floor((x + radius - f.origin_x) / f.resolution)
+        r0 = f.rows - 1 - math.floor((y + radius - f.origin_y) / f.resolution)
+        c1 = math.floor((x - radius - f.origin_x) / f.resolution)
+        r1 = f.rows - 1 - math.floor((y - radius - f.origin_y) / f.resolution)
+        top, left = max(r0, 0), max(c1, 0)
+        rows = slice(top, max(min(r1, f.rows - 1) + 1, top))  # never a negative (from the end) stop
+        cols = slice(left, max(min(c0, f.cols - 1) + 1, left))
+        cx, cy = self._centre_x[None, cols], self._centre_y[rows, None]
+        return rows, cols, np.hypot(cx - x, cy - y) <= radius
 
     def mark_body(self, pose: Pose) -> None:
-        rows, cols = self._disk(pose.x, pose.y, self.robot.radius_m)
-        F = self.free_evidence
-        F[rows, cols] = np.maximum(F[rows, cols] + self.params.l_body, self.params.free_clamp)
+        rows, cols, disk = self._disk(pose.x, pose.y, self.robot.radius_m)
+        F = self.free_evidence[rows, cols]
+        F[disk] = np.maximum(F[disk] + self.params.l_body, self.params.free_clamp)
         self._changed(occupied=False)
 
     def mark_contact(self, pose: Pose, direction_rad: float) -> None:
