@@ -169,15 +169,16 @@ class SlamEngine:
 
     def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
         belief = self.mapper.states()
+        exported = self._exported  # the export of an unchanged belief (most steps change nothing)
         if not np.array_equal(belief, self._belief):
             # The time limit runs from the last change of what the robot knows, not of the exported
             # map: in a large hall the area explored beyond a strip not yet seen free to the end is
             # grey in the export (not reachable from the start) while the robot maps it.
             self.stats.last_change_t = self.hw.now()
+            exported = classify(belief, self.frame.start_cell)
         self._belief = belief
         self._free_fraction = self.mapper.free_fraction()
         self._passable = self._free_fraction >= self.explorer.min_free_fraction
-        exported = classify(self._belief, self.frame.start_cell)
         changed = np.nonzero(exported != self._exported)
         self._exported = exported
         frontier = int(self.explorer.frontier(self._belief, self._passable).sum())
