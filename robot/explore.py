@@ -57,6 +57,9 @@ class Explorer:
     given_up: set[tuple[int, int]] = field(default_factory=set)
     max_escapes: int = 5  # times a robot boxed in by its own map may retry the cells it has stood in
     escapes: int = 0
+    _around_reach_cache: tuple[tuple[NDArray[np.bool_], tuple[int, int]], NDArray[np.bool_]] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
 
     def __post_init__(self) -> None:
         self.nav_rows = -(-self.grid.rows // self.block)
@@ -115,15 +118,23 @@ class Explorer:
         ``doubtful`` marks occupied cells worth a closer look (an occupied cell between the reachable
         area and unknown space may be a false echo closing off a passage); they count as frontier too.
         """
-        open_cells = passable | self._visited_map_cells()
-        reach = reachable_cells(~open_cells, *self._start_map_cell())
         unresolved = states == UNKNOWN
         if doubtful is not None:
             unresolved = unresolved | doubtful
-        front = unresolved & dilate8(reach)
+        front = unresolved & self._around_reach(passable | self._visited_map_cells())
         for cell in self.given_up:
             front[cell] = False
         return front
+
+    def _around_reach(self, open_cells: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """Map cells in or next to the open cells reachable from the start. Kept for the last
+        ``open_cells``: the engine asks after every step, and most steps open nothing new."""
+        key = (open_cells, self._start_map_cell())
+        cached = self._around_reach_cache
+        if cached is None or cached[0][1] != key[1] or not np.array_equal(cached[0][0], open_cells):
+            cached = (key, dilate8(reachable_cells(~open_cells, *key[1])))
+            self._around_reach_cache = cached
+        return cached[1]
 
     def _visited_map_cells(self) -> NDArray[np.bool_]:
         b = self.block
