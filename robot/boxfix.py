@@ -61,16 +61,26 @@ def edge_supported(
     f = g.resolution
     along = np.arange(-half_width, half_width + 1e-9, f)
     across = np.arange(-config.edge_band_m[0], config.edge_band_m[1] + 1e-9, f / 2) * outward
-    a, b = np.meshgrid(along, across, indexing="ij")
+    # Points (along, across) on a grid: the row of a point depends on its y alone and the column on
+    # its x, so each is converted once per line of points (GridSpec.world_to_index, broadcast).
     if horizontal:
-        xs, ys = hit[0] + b, hit[1] + a
+        xs, ys = hit[0] + across[None, :], hit[1] + along[:, None]
     else:
-        xs, ys = hit[0] + a, hit[1] + b
+        xs, ys = hit[0] + along[:, None], hit[1] + across[None, :]
     rows, cols = g.world_to_index(xs, ys)
     inside = g.contains_index(rows, cols)
-    solid = np.zeros(a.shape, dtype=bool)
-    solid[inside] = evidence.logodds[rows[inside], cols[inside]] >= config.occupied_logodds
-    return bool(np.mean(np.any(solid, axis=1)) >= config.edge_support)
+    solid = inside & (
+        evidence.logodds[np.clip(rows, 0, g.rows - 1), np.clip(cols, 0, g.cols - 1)] >= config.occupied_logodds
+    )
+    return bool(np.count_nonzero(np.any(solid, axis=1)) / along.size >= config.edge_support)
+
+
+def _median(values: list[float]) -> float:
+    """np.median of a short list (the middle value, or the mean of the two middle ones) without its
+    overhead: the same arithmetic."""
+    ordered = sorted(values)
+    mid = len(ordered) // 2
+    return ordered[mid] if len(ordered) % 2 else (ordered[mid - 1] + ordered[mid]) / 2.0
 
 
 def box_shift(config: BoxFixConfig, offsets: tuple[float | None, float | None]) -> tuple[float, float]:
@@ -124,4 +134,4 @@ def box_offsets(
                 if not edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
                     continue
             (dxs if horizontal else dys).append(offset)
-    return (float(np.median(dxs)) if dxs else None), (float(np.median(dys)) if dys else None)
+    return (_median(dxs) if dxs else None), (_median(dys) if dys else None)
