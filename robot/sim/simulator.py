@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from robot.config import RobotConfig, SimNoise
 from robot.errors import WorldError
 from robot.hardware import EncoderCounts, ImuSample, SonarSweep
-from robot.sim.sonar import cone_candidates, ray_blocked, simulate_ranges
+from robot.sim.sonar import Walls, cone_candidates, ray_blocked, simulate_ranges
 from robot.world import Pose, World
 
 
@@ -70,6 +70,7 @@ class SimRobot:
         self._rng = np.random.default_rng(seed)
         self._segments = world.segments
         self._clearance = SegmentDistance(world.segments)
+        self._walls = Walls(world.segments)
         self._dt = 1.0 / robot.imu.rate_hz  # physics tick = IMU period [s]
         self._t = 0.0  # sim clock [s]
         self._x, self._y, self._theta = world.start.x, world.start.y, world.start.theta
@@ -174,7 +175,7 @@ class SimRobot:
         mxy = self._mount_xy[idx]
         origins = np.column_stack([self._x + c * mxy[:, 0] - s * mxy[:, 1], self._y + s * mxy[:, 0] + c * mxy[:, 1]])
         bearings = self._theta + self._mount_bearing[idx]
-        dist, inc, points = cone_candidates(self._segments, origins, bearings, self._half_beam)
+        dist, inc, points = cone_candidates(self._walls, origins, bearings, self._half_beam)
         segs = self._segments
 
         def occluded(i: int, j: int) -> bool:

@@ -17,58 +17,72 @@ from robot.config import SimNoise, SonarModel
 _EPS = 1e-12
 
 
+class Walls:
+    """A world's segments (S, 4), with the per-segment terms every ping needs computed once."""
+
+    def __init__(self, segments: NDArray[np.float64]) -> None:
+        self.segments = segments
+        self.x0 = segments[None, :, 0]
+        self.y0 = segments[None, :, 1]
+        self.dx = segments[None, :, 2] - segments[None, :, 0]
+        self.dy = segments[None, :, 3] - segments[None, :, 1]
+        self.len2 = self.dx * self.dx + self.dy * self.dy
+        self.len2_floor = np.maximum(self.len2, _EPS)
+        self.length = np.sqrt(self.len2)
+
+
 def cone_candidates(
-    segments: NDArray[np.float64],
+    segments: NDArray[np.float64] | Walls,
     origins: NDArray[np.float64],
     bearings_rad: NDArray[np.float64],
     half_angle_rad: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Distance, incidence angle and position of every edge's nearest point inside every cone.
 
-    ``segments`` (S, 4) rows x0 y0 x1 y1 with free space on the left; ``origins`` (n, 2) and
-    ``bearings_rad`` (n,) describe the transducers. Returns ``dist`` (n, S) [m], ``inf`` where the edge
-    is outside the cone or faces away, and ``incidence`` (n, S) [rad], the angle between the echo path
-    and the edge's normal, and ``points`` (n, S, 2), the nearest points relative to the transducers.
+    ``segments`` (S, 4) rows x0 y0 x1 y1 with free space on the left (or ``Walls`` built from them);
+    ``origins`` (n, 2) and ``bearings_rad`` (n,) describe the transducers. Returns ``dist`` (n, S)
+    [m], ``inf`` where the edge is outside the cone or faces away, and ``incidence`` (n, S) [rad],
+    the angle between the echo path and the edge's normal, and ``points`` (n, S, 2), the nearest
+    points relative to the transducers.
     """
+    walls = segments if isinstance(segments, Walls) else Walls(segments)
     ox = origins[:, 0:1]
     oy = origins[:, 1:2]
-    p0x = segments[None, :, 0] - ox  # (n, S), segment start relative to the transducer
-    p0y = segments[None, :, 1] - oy
-    dx = np.broadcast_to(segments[None, :, 2] - segments[None, :, 0], p0x.shape)
-    dy = np.broadcast_to(segments[None, :, 3] - segments[None, :, 1], p0x.shape)
+    p0x = walls.x0 - ox  # (n, S), segment start relative to the transducer
+    p0y = walls.y0 - oy
+    dx, dy = walls.dx, walls.dy  # (1, S): broadcast against (n, S)
 
     # Only edges whose free side faces the transducer can echo.
     facing = (dx * (-p0y) - dy * (-p0x)) > _EPS
 
     t_lo = np.zeros_like(p0x)
     t_hi = np.ones_like(p0x)
-    feasible = facing.copy()
-    for sign in (-1.0, 1.0):
-        # Half-plane of the cone's edge ray u: sign * cross(u, p) >= 0 keeps the inside.
-        ang = bearings_rad[:, None] - sign * half_angle_rad
-        ux = np.cos(ang)
-        uy = np.sin(ang)
-        c0 = sign * (ux * p0y - uy * p0x)
-        c1 = sign * (ux * dy - uy * dx)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            root = -c0 / c1
-        pos = c1 > _EPS
-        neg = c1 < -_EPS
-        flat = ~(pos | neg)
-        t_lo = np.where(pos, np.maximum(t_lo, root), t_lo)
-        t_hi = np.where(neg, np.minimum(t_hi, root), t_hi)
-        feasible &= ~(flat & (c0 < 0))
-    feasible &= t_lo <= t_hi
-
-    len2 = dx * dx + dy * dy
-    t_star = np.clip(-(p0x * dx + p0y * dy) / np.maximum(len2, _EPS), t_lo, t_hi)
-    qx = p0x + t_star * dx
-    qy = p0y + t_star * dy
-    dist = np.hypot(qx, qy)
-    dist = np.where(feasible, dist, np.inf)
+    feasible = facing
     with np.errstate(divide="ignore", invalid="ignore"):
-        cos_inc = np.abs(qx * (-dy) + qy * dx) / (np.sqrt(len2) * np.maximum(dist, _EPS))
-    incidence = np.arccos(np.clip(cos_inc, 0.0, 1.0))
+        for sign in (-1.0, 1.0):
+            # Half-plane of the cone's edge ray u: sign * cross(u, p) >= 0 keeps the inside.
+            ang = bearings_rad[:, None] - sign * half_angle_rad
+            ux = np.cos(ang)
+            uy = np.sin(ang)
+            c0 = sign * (ux * p0y - uy * p0x)
+            c1 = sign * (ux * dy - uy * dx)
+            root = -c0 / c1
+            pos = c1 > _EPS
+            neg = c1 < -_EPS
+            flat = ~(pos | neg)
+            t_lo = np.where(pos, np.maximum(t_lo, root), t_lo)
+            t_hi = np.where(neg, np.minimum(t_hi, root), t_hi)
+            feasible &= ~(flat & (c0 < 0))
+        feasible &= t_lo <= t_hi
+
+        # np.clip's arithmetic (max, then min) without its overhead.
+        t_star = np.minimum(np.maximum(-(p0x * dx + p0y * dy) / walls.len2_floor, t_lo), t_hi)
+        qx = p0x + t_star * dx
+        qy = p0y + t_star * dy
+        dist = np.hypot(qx, qy)
+        dist = np.where(feasible, dist, np.inf)
+        cos_inc = np.abs(qx * (-dy) + qy * dx) / (walls.length * np.maximum(dist, _EPS))
+    incidence = np.arccos(np.minimum(np.maximum(cos_inc, 0.0), 1.0))
     return dist, incidence, np.stack([qx, qy], axis=-1)
 
 
