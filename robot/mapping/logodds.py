@@ -94,28 +94,35 @@ class _ArcStore:
         """The fine cell of every slot."""
         return self._touched[: self.n_touched]
 
-    def add(self, cells: NDArray[np.int64], prior: NDArray[np.float64], strength: float) -> None:
-        new = np.unique(cells[self._slot_of[cells] < 0])
+    def add(
+        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: NDArray[np.int64], strength: list[float]
+    ) -> None:
+        """Append arcs: ``cells`` and ``prior`` hold them end to end, ``sizes`` and ``strength`` one
+        entry per arc. New cells get slots arc by arc, in increasing cell order within an arc."""
+        unseen = self._slot_of[cells] < 0
+        new, first = np.unique(cells[unseen], return_index=True)
         if new.size:
+            new = new[np.lexsort((new, np.repeat(np.arange(sizes.size), sizes)[unseen][first]))]
             if self.n_touched + new.size > self._touched.size:
                 self._touched = np.resize(self._touched, max(2 * self._touched.size, self.n_touched + new.size))
             self._slot_of[new] = np.arange(self.n_touched, self.n_touched + new.size)
             self._touched[self.n_touched : self.n_touched + new.size] = new
             self.n_touched += new.size
-        n = cells.size
+        n, m = cells.size, sizes.size
         if self.n_cells + n > self.slots.size:
             size = max(2 * self.slots.size, self.n_cells + n)
             self.slots = np.resize(self.slots, size)
             self.prior = np.resize(self.prior, size)
-        if self.n_arcs + 1 > self.starts.size:
-            self.starts = np.resize(self.starts, 2 * self.starts.size)
-            self.strength = np.resize(self.strength, 2 * self.strength.size)
+        if self.n_arcs + m > self.starts.size:
+            size = max(2 * self.starts.size, self.n_arcs + m)
+            self.starts = np.resize(self.starts, size)
+            self.strength = np.resize(self.strength, size)
         self.slots[self.n_cells : self.n_cells + n] = self._slot_of[cells]
         self.prior[self.n_cells : self.n_cells + n] = prior
-        self.starts[self.n_arcs] = self.n_cells
-        self.strength[self.n_arcs] = strength
+        self.starts[self.n_arcs : self.n_arcs + m] = self.n_cells + np.cumsum(sizes) - sizes
+        self.strength[self.n_arcs : self.n_arcs + m] = strength
         self.n_cells += n
-        self.n_arcs += 1
+        self.n_arcs += m
 
 
 class LogOddsMapper:
@@ -218,28 +225,41 @@ class LogOddsMapper:
             rows, cols = cells.rows[free], cells.cols[free]
             np.add.at(F, (rows, cols), (p.l_free * w * echo_weight[free]).astype(np.float32))
             F[rows, cols] = np.maximum(F[rows, cols], p.free_clamp)
-        # The surface is at r; the occupied cell is the one just behind it.
+        # The surface is at r; the occupied cell is the one just behind it: each mapped echo's arc
+        # is its cone's cells at that distance, plus the cell on its axis.
         depth = p.hit_depth_cells * res
-        cols_n = self.fine.cols
+        f = self.fine
         span = max(p.max_echo_range_m - p.occ_full_m, 1e-9)
+        near_edge = [b.range_m + depth - 0.5 * res if m else math.inf for b, m in zip(beams, mapped, strict=True)]
+        far_edge = [b.range_m + depth + 0.5 * res if m else -math.inf for b, m in zip(beams, mapped, strict=True)]
+        on_arc = np.flatnonzero(
+            (cells.dist_m >= np.repeat(near_edge, sizes)) & (cells.dist_m < np.repeat(far_edge, sizes))
+        )
+        arc_index = cells.rows[on_arc] * f.cols + cells.cols[on_arc]
+        arc_prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[on_arc]
+        bounds = np.searchsorted(on_arc, found.starts)
+        parts_index, parts_prior, arc_sizes, strength = [], [], [], []
         for i, beam in enumerate(beams):
             if not mapped[i] or sizes[i] == 0:
                 continue
             r = beam.range_m
-            own = found.of(i)
-            dist = cells.dist_m[own]
-            arc = (dist >= r + depth - 0.5 * res) & (dist < r + depth + 0.5 * res)
-            index = cells.rows[own][arc] * cols_n + cells.cols[own][arc]
-            prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[own][arc]
-            ar, ac = self.fine.world_to_index(
-                beam.x + (r + depth) * math.cos(beam.axis_rad), beam.y + (r + depth) * math.sin(beam.axis_rad)
-            )
-            if self.fine.contains_index(ar, ac):
-                index = np.append(index, int(ar) * cols_n + int(ac))
+            index, prior = arc_index[bounds[i] : bounds[i + 1]], arc_prior[bounds[i] : bounds[i + 1]]
+            # GridSpec.world_to_index, on plain floats.
+            ac = math.floor((beam.x + (r + depth) * math.cos(beam.axis_rad) - f.origin_x) / f.resolution)
+            ar = f.rows - 1 - math.floor((beam.y + (r + depth) * math.sin(beam.axis_rad) - f.origin_y) / f.resolution)
+            if 0 <= ar < f.rows and 0 <= ac < f.cols:
+                index = np.append(index, ar * f.cols + ac)
                 prior = np.append(prior, 1.0)
             if index.size:
                 near = min(max((p.max_echo_range_m - r) / span, 0.0), 1.0)
-                self._arcs.add(index, prior, p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
+                parts_index.append(index)
+                parts_prior.append(prior)
+                arc_sizes.append(index.size)
+                strength.append(p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
+        if parts_index:
+            self._arcs.add(
+                np.concatenate(parts_index), np.concatenate(parts_prior), np.array(arc_sizes, dtype=np.int64), strength
+            )
         self._sweeps_since_full += 1
         self._update_support(full=False)
 
