@@ -222,9 +222,11 @@ class LogOddsMapper:
             fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
             w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
             echo_weight = np.repeat([1.0 if beam.echo else p.no_echo_weight for beam in beams], sizes)
-            rows, cols = cells.rows[free], cells.cols[free]
-            np.add.at(F, (rows, cols), (p.l_free * w * echo_weight[free]).astype(np.float32))
-            F[rows, cols] = np.maximum(F[rows, cols], p.free_clamp)
+            # ufunc.at on flat indices (its fast path) adds repeats in order, as on (row, col) pairs.
+            flat_f = F.reshape(-1)
+            index = cells.rows[free] * self.fine.cols + cells.cols[free]
+            np.add.at(flat_f, index, (p.l_free * w * echo_weight[free]).astype(np.float32))
+            flat_f[index] = np.maximum(flat_f[index], p.free_clamp)
         # The surface is at r; the occupied cell is the one just behind it: each mapped echo's arc
         # is its cone's cells at that distance, plus the cell on its axis.
         depth = p.hit_depth_cells * res
