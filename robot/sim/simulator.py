@@ -104,7 +104,7 @@ class SimRobot:
 
     def set_wheel_speeds(self, left_m_s: float, right_m_s: float) -> None:
         vmax = self.robot.max_wheel_speed_m_s
-        self._cmd = (float(np.clip(left_m_s, -vmax, vmax)), float(np.clip(right_m_s, -vmax, vmax)))
+        self._cmd = (min(max(float(left_m_s), -vmax), vmax), min(max(float(right_m_s), -vmax), vmax))
 
     def stop(self) -> None:
         self._cmd = (0.0, 0.0)
