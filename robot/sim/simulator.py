@@ -70,6 +70,7 @@ class SimRobot:
         self._rng = np.random.default_rng(seed)
         self._segments = world.segments
         self._clearance = SegmentDistance(world.segments)
+        self._clear_here: float | None = None  # clearance of the body's centre [m], or a lower bound
         self._walls = Walls(world.segments)
         self._dt = 1.0 / robot.imu.rate_hz  # physics tick = IMU period [s]
         self._t = 0.0  # sim clock [s]
@@ -212,14 +213,22 @@ class SimRobot:
             rate = wheel_rate = dth / dt
             path = np.add.accumulate(np.abs(ds))
             ok = ticks
-            if path[-1] > 0.0:
+            radius, path_m = self.robot.radius_m, float(path[-1])
+            known = self._clear_here
+            if path_m > 0.0 and known is not None and known - path_m >= radius + path_m + 1e-6:
+                # The end point is within the path length of the start, whose clearance is known: it is
+                # clear by more than the path length too (with a micrometre to spare for rounding).
+                self._clear_here = known - path_m  # a lower bound, which is all the next check needs
+            elif path_m > 0.0:
                 # Every tick lies within the path length of the end point, so a clear end point with
                 # that much to spare rules out a collision without checking each tick.
                 end_clear = self._clearance(xs[-1:], ys[-1:])[0]
-                if end_clear < self.robot.radius_m + path[-1]:
+                self._clear_here = float(end_clear)
+                if end_clear < radius + path[-1]:
                     clearance = self._clearance(xs, ys)
-                    hit = np.flatnonzero(clearance < self.robot.radius_m)
+                    hit = np.flatnonzero(clearance < radius)
                     if hit.size:
+                        self._clear_here = None
                         ok = int(hit[0])  # the body stops at the last free tick ...
                         self.collisions += ticks - ok
                         if wl + wr == 0.0:
