@@ -436,11 +436,13 @@ class LogOddsMapper:
         self._fine_cache = out
         return out
 
-    def _block_counts(self, mask: NDArray[np.bool_]) -> NDArray[np.int32]:
+    def _block_counts(self, mask: NDArray[np.bool_]) -> NDArray[np.int8] | NDArray[np.int32]:
         """Per map cell, how many of its k x k evidence cells ``mask`` holds (summed over the rows of a
         block, then its columns: two contiguous reductions instead of one over two strided axes)."""
         grid = self.frame.grid
         k = self.k
+        if k == 1:  # one evidence cell per map cell: the mask is the count
+            return mask.view(np.int8)
         rows = mask.reshape(grid.rows, k, grid.cols * k).sum(axis=1, dtype=np.int32)
         return rows.reshape(grid.rows, grid.cols, k).sum(axis=2, dtype=np.int32)
 
