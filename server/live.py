@@ -1,8 +1,9 @@
 """A run's live view on the event loop: the grid and pose as viewers see them, snapshots, and fan-out.
 
-The run thread never touches this object; it hands each step over with ``call_soon_threadsafe``. So the
-view changes only between messages, and a snapshot taken here is exactly the state after ``seq``:
-the steps a new viewer receives next continue it without gap or overlap.
+The run's body (in a child process, or on a thread for real hardware) never touches this object: its
+handle (``server/session.py``) applies each of its messages here, on the loop. So the view changes only
+between messages, and a snapshot taken here is exactly the state after ``seq``: the steps a new viewer
+receives next continue it without gap or overlap.
 """
 
 from __future__ import annotations
@@ -128,9 +129,9 @@ class LiveRun:
             self._snapshot = Outgoing.of(self.snapshot())
         return self._snapshot
 
-    # -- messages from the run thread ------------------------------------------------------------
+    # -- messages from the run's body ------------------------------------------------------------
     def on_step(self, msg: dict[str, Any], text: str, wall_time: float | None = None) -> None:
-        """A step as the run thread encoded it: only what changed since the step before."""
+        """A step as the run's body encoded it: only what changed since the step before."""
         self.seq = msg["seq"]
         if "cells" in msg:
             changes = np.asarray(msg["cells"], dtype=np.int64)

@@ -13,15 +13,16 @@ from typing import Any
 
 from robot.grid import GridSpec
 from robot.mapio import atomic_write_bytes, read_csv, write_csv
-from robot.metrics import score
 from robot.settings import load_run_config
 from server.downloads import MEDIA_TYPES
+from server.engine_process import warm_up
 from server.errors import ApiError, conflict, not_found
 from server.hardware import halt
 from server.live import LiveRun, robot_view
 from server.models import ConfigUpdate, GridInfo, Progress, RunCreate, RunDefaults, RunView
 from server.plan import RunPlan, merge_options, validate_options
-from server.session import RunSession, write_checkpoint
+from server.run_body import RunJob, checkpoint_metrics, truncate_to_last_line, write_checkpoint
+from server.session import RunSession
 from server.settings import ServerSettings
 from server.store import ACTIVE, RunRecord, RunStore
 from server.worlds import WorldCatalog
@@ -31,26 +32,15 @@ log = logging.getLogger("sonarslam.server")
 DEFAULTS_KEY = "run_defaults"
 DEFAULT_WORLD = "room1"
 DEFAULT_SPEED = 10.0  # real-time factor: fast enough to watch a whole room, slow enough to follow
-STOP_WAIT_S = 30.0  # how long stop and delete wait for a run thread to end
+STOP_WAIT_S = 30.0  # how long stop, delete and shutdown wait for a run to end
 
 
 def iso(t: float | None) -> str | None:
     return datetime.fromtimestamp(t, UTC).isoformat(timespec="milliseconds") if t is not None else None
 
 
-def truncate_to_last_line(path: Path) -> None:
-    """A log cut by a crash may end mid-record; drop the partial line so that replay can read it."""
-    if not path.exists():
-        return
-    data = path.read_bytes()
-    cut = data.rfind(b"\n") + 1
-    if cut < len(data):
-        with open(path, "r+b") as fh:
-            fh.truncate(cut)
-
-
 class RunManager:
-    """Owns every run of this service. Lives on the event loop; run threads report back through it."""
+    """Owns every run of this service. Lives on the event loop; runs report back through it."""
 
     def __init__(self, settings: ServerSettings, store: RunStore, catalog: WorldCatalog) -> None:
         self.settings = settings
@@ -69,7 +59,13 @@ class RunManager:
     async def start(self) -> None:
         self._loop = asyncio.get_running_loop()
         self.runs_dir.mkdir(parents=True, exist_ok=True)
+        if self._engine_in_child:
+            warm_up()  # in the background: the first run waits for it only if it comes within a second
         await asyncio.to_thread(self.recover)
+
+    @property
+    def _engine_in_child(self) -> bool:
+        return self.settings.hardware == "sim" and self.settings.sim_engine == "process"
 
     def recover(self) -> None:
         """After a crash: runs that were in progress become ``interrupted``, with their last checkpoint."""
@@ -77,23 +73,23 @@ class RunManager:
             run_dir = self.run_dir(run_id)
             try:
                 truncate_to_last_line(run_dir / "sensors.log")
-                truth_path = run_dir / "truth.csv"
-                if (run_dir / "map.csv").exists() and truth_path.exists():
-                    metrics = score(read_csv(run_dir / "map.csv"), read_csv(truth_path)).as_dict()
+                metrics = checkpoint_metrics(run_dir)
+                if metrics is not None:
                     self.store.update(run_id, metrics=metrics)
             except Exception:
                 log.exception("run %s: could not tidy its checkpoint", run_id)
             log.warning("run %s was interrupted by a restart; its last checkpoint is kept", run_id)
 
     async def shutdown(self) -> None:
-        """Stop every run (they end as ``interrupted`` with their map saved) and wait for the threads."""
+        """Stop every run (they end as ``interrupted`` with their map saved) and wait for them to end."""
         for session in list(self.sessions.values()):
             session.request_stop("shutdown")
-            if session.id in self._queue:  # never started: its thread ends at once
+            if session.id in self._queue:  # never started: it ends at once
                 session.start()
         self._queue.clear()
         for session in list(self.sessions.values()):
-            await asyncio.to_thread(session.thread.join, STOP_WAIT_S)
+            if not await self._wait_ended(session.id):
+                session.abandon()
         for live in self.lives.values():
             live.broadcaster.close_all()
 
@@ -202,17 +198,9 @@ class RunManager:
             self.settings.ws_queue_size,
         )
         assert self._loop is not None
-        session = RunSession(
-            record.id,
-            plan,
-            run_dir,
-            self.store,
-            live,
-            self._loop,
-            self.settings.checkpoint_interval_s,
-            self._on_exit,
-            self.settings.pi_config_file,
-        )
+        job = RunJob(record.id, plan, run_dir, self.settings.checkpoint_interval_s, self.settings.pi_config_file)
+        in_child = plan.hardware == "sim" and self._engine_in_child
+        session = RunSession(job, self.store, live, self._loop, self._on_exit, in_child)
         self.sessions[record.id] = session
         self.lives[record.id] = live
         self._ended[record.id] = asyncio.Event()
@@ -238,7 +226,7 @@ class RunManager:
             self.sessions[run_id].start()
 
     def _on_exit(self, session: RunSession) -> None:
-        """Called on the loop once a run thread has published its end."""
+        """Called on the loop once a run has published its end."""
         self._running.discard(session.id)
         self.sessions.pop(session.id, None)
         live = self.lives.pop(session.id, None)
@@ -249,13 +237,16 @@ class RunManager:
             event.set()
         self._pump()
 
-    async def _wait_ended(self, run_id: str) -> None:
+    async def _wait_ended(self, run_id: str) -> bool:
+        """Wait for a run to end; False if it did not within ``STOP_WAIT_S``."""
         event = self._ended.get(run_id)
         if event is not None:
             try:
                 await asyncio.wait_for(event.wait(), STOP_WAIT_S)
             except TimeoutError:
                 log.warning("run %s did not end within %.0f s of being stopped", run_id, STOP_WAIT_S)
+                return False
+        return True
 
     async def stop(self, run_id: str) -> RunRecord:
         record = self.record(run_id)
@@ -263,7 +254,7 @@ class RunManager:
         if session is None:
             raise conflict(f"run {run_id} has already ended ({record.status})")
         session.request_stop("stopped")
-        if run_id in self._queue:  # never started: its thread ends at once
+        if run_id in self._queue:  # never started: it ends at once
             self._queue.remove(run_id)
             self._running.add(run_id)
             session.start()

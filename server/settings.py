@@ -36,6 +36,9 @@ class ServerSettings(BaseSettings):
     view_access: Literal["open", "token"] = "open"  # whether viewing (GET, WebSocket) needs the token too
     cors_origins: tuple[str, ...] = ()  # browser origins allowed to call the API from other sites
     max_concurrent_runs: int = Field(default=2, ge=1, le=64)  # simulator only; hardware runs one at a time
+    # Where a simulated run's step engine runs: a child process of its own (the event loop never shares the
+    # interpreter lock with it), or a thread of the service as real hardware always does (for profiling).
+    sim_engine: Literal["process", "thread"] = "process"
     max_queued_runs: int = Field(default=16, ge=0, le=1000)  # runs waiting for a slot before 429 (simulator)
     checkpoint_interval_s: float = Field(default=3.0, gt=0.0, le=3600.0)  # map checkpoint period [s wall]
     ws_queue_size: int = Field(default=64, ge=2, le=100_000)  # messages a viewer may fall behind before merging

@@ -87,7 +87,8 @@ class RunRecord:
 
 
 class RunStore:
-    """One SQLite connection shared by the event loop and the run threads, serialised by a lock.
+    """One SQLite connection shared by the event loop and the run threads, serialised by a lock (a run in a
+    child process opens one of its own: WAL lets processes share the file).
 
     Every statement is short; commits are durable (``synchronous=FULL``) so that a run recorded as
     finished stays finished after a crash.

@@ -78,7 +78,7 @@ def view_from_checkpoint(saved: dict[str, Any], max_range_m: float | None) -> di
 
 
 class StepDeltas:
-    """The run thread's half of the protocol: each step says what changed since the step before."""
+    """The run body's half of the protocol: each step says what changed since the step before."""
 
     def __init__(self) -> None:
         self.last = dict(VIEW_FIELDS)

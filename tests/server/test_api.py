@@ -261,13 +261,16 @@ def test_runs_beyond_the_limit_wait_queued(make_server: Any) -> None:
         assert api.patch(f"/api/runs/{first['id']}", json={"speed": 2}).status_code == 409
 
 
-def test_a_run_that_fails_ends_as_error_with_its_reason(server: LiveServer, monkeypatch: pytest.MonkeyPatch) -> None:
-    import server.session as session
+def test_a_run_that_fails_ends_as_error_with_its_reason(make_server: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    import server.run_body as run_body
 
     def broken(*args: Any, **kwargs: Any) -> Any:
         raise HardwareError("left motor driver not answering")
 
-    monkeypatch.setattr(session, "open_hardware", broken)
+    monkeypatch.setattr(run_body, "open_hardware", broken)
+    # On a thread of the service, as real hardware runs, where the patch reaches (a child process has its
+    # own copy of the module; tests/server/test_engine_process.py fails runs there).
+    server: LiveServer = make_server(sim_engine="thread")
     with server.client() as api:
         run_id = api.post("/api/runs", json=FAST).json()["id"]
         run = wait_ended(api, run_id)
