@@ -168,6 +168,27 @@ def _child_main(target: Callable[..., None], args: tuple[Any, ...], messages: Co
 
 
 # -- the parent's side --------------------------------------------------------------------------------
+class FrameReader:
+    """The parent's end of the message pipe: bytes as they come in, whole messages out."""
+
+    def __init__(self) -> None:
+        self._buffer = bytearray()
+
+    def feed(self, chunk: bytes) -> list[Message]:
+        buf = self._buffer
+        buf += chunk
+        at, messages = 0, []
+        while len(buf) - at >= HEADER.size:
+            (size,) = HEADER.unpack_from(buf, at)
+            if len(buf) - at - HEADER.size < size:
+                break  # the rest of it is on its way
+            at += HEADER.size
+            messages.append(pickle.loads(buf[at : at + size]))
+            at += size
+        del buf[:at]
+        return messages
+
+
 def describe_exit(exitcode: int | None) -> str:
     if exitcode is None:
         return "did not exit"
@@ -204,7 +225,7 @@ class EngineProcess:
         self.ended_by = ended_by
         self.on_end = on_end
         self.ended = False  # a message said the child has finished its work
-        self._buffer = bytearray()
+        self._frames = FrameReader()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._launch: asyncio.Future[None] | None = None
         self._end: asyncio.Task[None] | None = None
@@ -249,18 +270,7 @@ class EngineProcess:
             self._messages.close()
             self._end = self._loop.create_task(self._ended())
             return
-        buf = self._buffer
-        buf += chunk
-        at, messages = 0, []
-        while len(buf) - at >= HEADER.size:
-            (size,) = HEADER.unpack_from(buf, at)
-            if len(buf) - at - HEADER.size < size:
-                break
-            at += HEADER.size
-            messages.append(pickle.loads(buf[at : at + size]))
-            at += size
-        del buf[:at]
-        for message in messages:
+        for message in self._frames.feed(chunk):
             self.ended = self.ended or self.ended_by(message)
             self.deliver(message)
 

@@ -4,6 +4,7 @@ on; a graceful shutdown interrupts the run, and a service killed with -9 takes i
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import shutil
 import signal
@@ -17,6 +18,8 @@ import httpx
 from live_client import Viewer, run_async, wait_ended, watch
 from live_server import LiveServer
 from service_process import serve_process
+
+from server.engine_process import FrameReader, FrameWriter
 
 FAST = {"world": "room2", "speed": "max", "max_steps": 40}
 SLOW = {"world": "room1", "speed": 0.2, "max_steps": 5000}  # a fifth of real time: a step takes seconds
@@ -144,3 +147,19 @@ def test_a_service_killed_with_9_leaves_its_run_to_recovery(tmp_path: Path) -> N
     with sqlite3.connect(data / "sonarslam.db") as db:
         status = db.execute("SELECT status FROM runs WHERE id = ?", (run_id,)).fetchone()[0]
     assert status == "running"  # as the service left it: the next start recovers it as interrupted
+
+
+def test_steps_wait_in_order_while_the_parent_falls_behind() -> None:
+    """The child's messages never block it: what the pipe cannot take waits, and arrives in order."""
+    parent, child = multiprocessing.Pipe(duplex=False)
+    writer = FrameWriter(child)
+    sent = [("step", i, "x" * 1000) for i in range(500)]  # 0.5 MB: several times what a pipe holds
+    for message in sent:
+        writer.send(message)  # the parent reads nothing yet: this returns all the same
+    reader = FrameReader()
+    received: list[Any] = []
+    while len(received) < len(sent):
+        received += reader.feed(os.read(parent.fileno(), 1 << 16))  # a flusher thread writes as room appears
+    writer.close()
+    assert received == sent
+    assert os.read(parent.fileno(), 1) == b""  # then end-of-file
