@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import base64
+import contextlib
 import json
 import os
 import queue
@@ -38,6 +39,8 @@ import time
 import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -53,11 +56,53 @@ from server.settings import ServerSettings
 URL_LINE = re.compile(r"(http://127\.0\.0\.1:\d+)/")
 
 
+def _stat(path: str) -> list[str]:
+    return Path(path).read_text().rsplit(")", 1)[1].split()  # fields from the state on (the name may hold spaces)
+
+
 def cpu_seconds(pid: int, main_thread_only: bool = False) -> float:
     """User + system CPU time of a process (or of its main thread: the service's event loop) so far."""
-    path = f"/proc/{pid}/task/{pid}/stat" if main_thread_only else f"/proc/{pid}/stat"
-    fields = Path(path).read_text().rsplit(")", 1)[1].split()
+    fields = _stat(f"/proc/{pid}/task/{pid}/stat" if main_thread_only else f"/proc/{pid}/stat")
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def context_switches(pid: int) -> int:
+    """How often the service's main thread (its event loop) has been switched out so far: each time it
+    slept and woke, or waited for the interpreter lock, or was preempted."""
+    status = Path(f"/proc/{pid}/task/{pid}/status").read_text().splitlines()
+    return sum(int(line.split()[1]) for line in status if line.split(":")[0].endswith("ctxt_switches"))
+
+
+def children_of() -> dict[int, list[int]]:
+    """Every process's children, from /proc."""
+    out: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError):  # gone meanwhile
+                out.setdefault(int(_stat(f"/proc/{entry.name}/stat")[1]), []).append(int(entry.name))
+    return out
+
+
+def tree_cpu_seconds(pid: int, children: dict[int, list[int]] | None = None) -> float:
+    """CPU time of a process and all its descendants so far: the service, its forkserver and the runs' engine
+    processes. An ended child's time is in its parent's (once reaped), a live one's is its own."""
+    children = children_of() if children is None else children
+    try:
+        fields = _stat(f"/proc/{pid}/stat")
+    except OSError:
+        return 0.0  # ended meanwhile: its parent will count it
+    own = sum(int(v) for v in fields[11:15]) / os.sysconf("SC_CLK_TCK")  # utime, stime, cutime, cstime
+    return own + sum(tree_cpu_seconds(child, children) for child in children.get(pid, ()))
+
+
+def wait_engines_reaped(pid: int, timeout_s: float = 10.0) -> None:
+    """Until no grandchild of the service is left (the engine process of a run that has just ended)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        children = children_of()
+        if not any(children.get(child) for child in children.get(pid, ())):
+            return
+        time.sleep(0.01)
 
 
 SERVICE_PID: list[int] = []  # the running service's process id, for cpu_seconds()
@@ -330,64 +375,101 @@ async def drain(url: str, path: str) -> tuple[int, bool]:
     return received, deflated
 
 
-async def timed_run(url: str, world: str, viewers: int, max_steps: int) -> tuple[float, float, float, int, int]:
-    """The run's wall time, the service's and its event loop's CPU time while it ran [s], the bytes all
-    viewers received, and how many of them got permessage-deflate."""
+@dataclass
+class Timed:
+    """One run: its wall time, CPU times while it ran [s], what its viewers received."""
+
+    wall_s: float
+    tree_cpu_s: float  # the service with its engine processes
+    service_cpu_s: float  # the service process alone (its event loop and threads)
+    loop_cpu_s: float  # the event loop's thread
+    loop_switches: int  # the event loop's thread's context switches
+    received: int  # bytes, all viewers
+    deflated: int  # viewers that got permessage-deflate
+
+
+async def timed_run(url: str, world: str, viewers: int, max_steps: int) -> Timed:
     run_id = await asyncio.to_thread(queued_run, url, world, max_steps=max_steps)
     viewing = [asyncio.create_task(drain(url, f"/ws/runs/{run_id}")) for _ in range(viewers)]
     await asyncio.sleep(0.8)  # the viewers connect while the run waits its turn (about 2 s)
     pid = SERVICE_PID[0]
-    cpu0, loop0 = cpu_seconds(pid), cpu_seconds(pid, main_thread_only=True)
+    tree0, cpu0, loop0 = tree_cpu_seconds(pid), cpu_seconds(pid), cpu_seconds(pid, main_thread_only=True)
+    switches0 = context_switches(pid)
     drained = await asyncio.gather(*viewing)
     run = await asyncio.to_thread(wait_ended, url, run_id)
-    cpu, loop = cpu_seconds(pid) - cpu0, cpu_seconds(pid, main_thread_only=True) - loop0
-    return float(run["wall_time_s"]), cpu, loop, sum(b for b, _ in drained), sum(d for _, d in drained)
+    await asyncio.to_thread(wait_engines_reaped, pid)  # so that its engine's CPU time has been added up
+    return Timed(
+        float(run["wall_time_s"]),
+        tree_cpu_seconds(pid) - tree0,
+        cpu_seconds(pid) - cpu0,
+        cpu_seconds(pid, main_thread_only=True) - loop0,
+        context_switches(pid) - switches0,
+        sum(b for b, _ in drained),
+        sum(d for _, d in drained),
+    )
 
 
 def bench_slowdown(url: str, world: str, viewers: int, repeats: int, max_steps: int) -> None:
     print(f"\n3. max-speed run wall time, {viewers} viewers vs none ({world}, {max_steps} steps, {repeats} pairs)")
-    alone: list[float] = []
-    watched: list[float] = []
-    cpu_alone: list[float] = []
-    cpu_watched: list[float] = []
-    loop_alone: list[float] = []
-    loop_watched: list[float] = []
-    received: list[int] = []
-    deflated: list[int] = []
+    alone: list[Timed] = []
+    watched: list[Timed] = []
     for _ in range(repeats):  # alternate, so that drift in machine load hits both alike
-        wall, cpu, loop, _, _ = asyncio.run(timed_run(url, world, 0, max_steps))
-        alone.append(wall)
-        cpu_alone.append(cpu)
-        loop_alone.append(loop)
-        wall, cpu, loop, nbytes, ndeflated = asyncio.run(timed_run(url, world, viewers, max_steps))
-        watched.append(wall)
-        cpu_watched.append(cpu)
-        loop_watched.append(loop)
-        received.append(nbytes)
-        deflated.append(ndeflated)
-    a, w = statistics.median(alone), statistics.median(watched)
-    ca, cw = statistics.median(cpu_alone), statistics.median(cpu_watched)
-    la, lw = statistics.median(loop_alone), statistics.median(loop_watched)
+        alone.append(asyncio.run(timed_run(url, world, 0, max_steps)))
+        watched.append(asyncio.run(timed_run(url, world, viewers, max_steps)))
+
+    def median(runs: list[Timed], key: str) -> float:
+        return statistics.median(getattr(t, key) for t in runs)
+
+    a, w = median(alone, "wall_s"), median(watched, "wall_s")
+    best_a, best_w = min(t.wall_s for t in alone), min(t.wall_s for t in watched)
+    deflated = [t.deflated for t in watched]
     print(
         f"   viewers offer permessage-deflate; the service accepted it for {min(deflated)}-{max(deflated)} of "
-        f"{viewers}; {statistics.median(received) / viewers / 1e3:.1f} kB on the wire per viewer and run (median)"
+        f"{viewers}; {median(watched, 'received') / viewers / 1e3:.1f} kB on the wire per viewer and run (median)"
     )
-    print(f"   no viewers: median {a:.2f} s, best {min(alone):.2f} s {sorted(round(x, 2) for x in alone)}")
-    print(f"   {viewers} viewers: median {w:.2f} s, best {min(watched):.2f} s {sorted(round(x, 2) for x in watched)}")
+    print(f"   no viewers: median {a:.2f} s, best {best_a:.2f} s {sorted(round(t.wall_s, 2) for t in alone)}")
+    print(f"   {viewers} viewers: median {w:.2f} s, best {best_w:.2f} s {sorted(round(t.wall_s, 2) for t in watched)}")
     # Other work on the machine only ever adds time: the best of several runs is the steadiest figure.
-    print(f"   slowdown: {100 * (min(watched) / min(alone) - 1):+.1f} % (best), {100 * (w / a - 1):+.1f} % (median)")
-    # The engine and the event loop share one interpreter lock: the service's extra CPU time is the time
-    # the loop took from the run, whatever else the machine is doing.
-    print(f"   service CPU time: {ca:.2f} s alone, {cw:.2f} s with {viewers} viewers: {100 * (cw / ca - 1):+.1f} %")
+    print(f"   slowdown: {100 * (best_w / best_a - 1):+.1f} % (best), {100 * (w / a - 1):+.1f} % (median)")
+    for label, key in (
+        ("service CPU time, with its engine processes", "tree_cpu_s"),
+        ("the service process alone (event loop and threads)", "service_cpu_s"),
+    ):
+        ca, cw = median(alone, key), median(watched, key)
+        print(f"   {label}: {ca:.2f} s alone, {cw:.2f} s with {viewers} viewers: {100 * (cw / ca - 1):+.1f} %")
+    la, lw = median(alone, "loop_cpu_s"), median(watched, "loop_cpu_s")
+    # With the engine on a thread of the service, the loop's extra CPU time is time it took from the run
+    # (one interpreter lock); with the engine in a child process it competes only for the machine's cores.
     print(
-        f"   event loop CPU time: {la:.2f} s alone, {lw:.2f} s with {viewers} viewers: the viewers cost the run "
-        f"{100 * (lw - la) / a:.1f} % of its wall time"
+        f"   event loop CPU time: {la:.2f} s alone, {lw:.2f} s with {viewers} viewers: the viewers cost it "
+        f"{lw - la:.2f} s, {100 * (lw - la) / a:.1f} % of the run's wall time"
     )
+    # A loop that contends with the engine for the interpreter lock switches many times more often.
+    for label, runs in (("alone", alone), (f"with {viewers} viewers", watched)):
+        print(f"   event loop context switches {label}: {sorted(t.loop_switches for t in runs)}")
+
+
+def bench_start(url: str, world: str, runs: int) -> None:
+    """From the request to the run's first step being under way: created_at to started_at, as the service
+    records them (validation, the run's folder, the engine process if any, opening the simulator)."""
+    print(f"\n4. start latency, {runs} one-step runs of {world} one after another (created -> started)")
+    took: list[float] = []
+    for _ in range(runs):
+        run = wait_ended(url, start_run(url, world, max_steps=1))
+        took.append(1e3 * (iso_seconds(run["started_at"]) - iso_seconds(run["created_at"])))
+    print(
+        f"   first {took[0]:.0f} ms; the others median {statistics.median(took[1:]):.0f} ms, "
+        f"best {min(took[1:]):.0f} ms, worst {max(took[1:]):.0f} ms"
+    )
+
+
+def iso_seconds(text: str) -> float:
+    return datetime.fromisoformat(text).timestamp()
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", choices=("bytes", "latency", "slowdown"), default=None)
+    parser.add_argument("--only", choices=("bytes", "latency", "slowdown", "start"), default=None)
     parser.add_argument("--world", default="room1")
     parser.add_argument("--viewers", type=int, default=50)
     parser.add_argument("--steps", type=int, default=400, help="steps per latency / slowdown run")
@@ -397,6 +479,12 @@ def main(argv: list[str] | None = None) -> int:
         choices=("true", "false"),
         default=None,
         help="the service's ws_compression for latency and slowdown (default: the service's default)",
+    )
+    parser.add_argument(
+        "--sim-engine",
+        choices=("process", "thread"),
+        default=None,
+        help="where the service runs a simulated run's engine (default: the service's default, a child process)",
     )
     args = parser.parse_args(argv)
     print(f"cpus: {os.cpu_count()}, load average: {os.getloadavg()[0]:.2f}")
@@ -419,10 +507,14 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), ws_compression="true") as url:
             bench_bytes(url, args.world, [0.2, 0.1])
     overrides = {} if args.ws_compression is None else {"ws_compression": args.ws_compression}
-    if args.only in (None, "latency", "slowdown"):
-        which = f"ws_compression={args.ws_compression}" if overrides else "default settings"
-        print(f"\n   latency and slowdown: service with {which}; viewers offer permessage-deflate")
+    if args.sim_engine is not None:
+        overrides["sim_engine"] = args.sim_engine
+    if args.only in (None, "latency", "slowdown", "start"):
+        which = ", ".join(f"{k}={v}" for k, v in overrides.items()) or "default settings"
+        print(f"\n   latency, slowdown and start: service with {which}; viewers offer permessage-deflate")
     with tempfile.TemporaryDirectory() as tmp, service(Path(tmp), **overrides) as url:
+        if args.only in (None, "start"):
+            bench_start(url, args.world, 12)  # first: the first run may wait for the service's warm-up
         if args.only in (None, "latency"):
             bench_latency(url, args.world, [1, args.viewers], args.steps)
         if args.only in (None, "slowdown"):
