@@ -60,7 +60,7 @@ class RunManager:
         self._loop = asyncio.get_running_loop()
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         if self._engine_in_child:
-            warm_up()  # in the background: the first run waits for it only if it comes within a second
+            warm_up()  # in the background: only a run asked for in its first second or two waits for it
         await asyncio.to_thread(self.recover)
 
     @property

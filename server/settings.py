@@ -46,9 +46,9 @@ class ServerSettings(BaseSettings):
     # viewers of a max-speed room1 run it cut the bytes from 5.0-5.5 % of resending the grid to 4.6 %
     # and the run's slowdown from +8-17 % to +8-10 %, for a pose latency p99 of 31 ms instead of 24.
     ws_max_rate_hz: float = Field(default=25.0, ge=1.0, le=10_000.0)
-    # Offer permessage-deflate to viewers (browsers accept it): about a third of the bytes on the wire, but
-    # each viewer's messages are compressed on the event loop, which shares the interpreter lock with the
-    # engines: 50 compressed viewers slowed a max-speed run by 40 % (docs/protocol.md, Compression).
+    # Offer permessage-deflate to viewers (browsers accept it): about a third of the bytes on the wire, for
+    # a compressor per viewer (~45 kB) and the loop's CPU: 50 compressed viewers slowed a max-speed run by
+    # 40-58 % while engines ran on a thread of the service, +0.6-1.9 % in child processes (docs/protocol.md).
     # On: SONARSLAM_WS_COMPRESSION=true, or ws_compression = true in config/server.toml.
     ws_compression: bool = False
     max_body_bytes: int = Field(default=1 << 20, ge=1024, le=1 << 30)  # any request body
