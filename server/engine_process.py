@@ -48,7 +48,8 @@ from typing import Any
 log = logging.getLogger("sonarslam.server")
 
 # Imported once by the forkserver; every child starts from them. "__main__" spares the child from importing
-# the service's entry script again (as multiprocessing otherwise does when the service runs from a script).
+# the service's entry script again (as multiprocessing otherwise does when the service runs from a script);
+# like any multiprocessing program, a script that starts the service keeps it under `if __name__ == "__main__"`.
 PRELOAD = ["__main__", "server.run_body"]
 HEADER = struct.Struct("!I")  # a message's length [bytes]
 READ_SIZE = 1 << 18  # what the parent reads from the pipe at once [bytes]
