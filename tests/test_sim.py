@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -205,6 +206,18 @@ def test_same_seed_same_run() -> None:
 
     assert run(4) == run(4)
     assert run(4) != run(5)
+
+
+def test_a_slow_sleep_ends_soon_after_the_speed_goes_to_max() -> None:
+    # At 0.01 x real time this 3 s sleep would last 5 minutes; a stop sets the speed to None.
+    sim = SimRobot(box_world(), ROBOT, SimNoise(), seed=1, speed=0.01)
+    done = threading.Event()
+    sleeper = threading.Thread(target=lambda: (sim.sleep(3.0), done.set()), daemon=True)
+    sleeper.start()
+    assert not done.wait(0.2)  # it is pacing
+    sim.set_speed(None)
+    assert done.wait(10.0)
+    assert sim.now() == pytest.approx(3.0)  # the sim time it was asked for, all of it
 
 
 def test_a_lost_echo_never_lets_a_surface_behind_an_obstacle_answer() -> None:

@@ -19,6 +19,8 @@ from robot.hardware import EncoderCounts, ImuSample, SonarSweep
 from robot.sim.sonar import Walls, cone_candidates, ray_blocked, simulate_ranges
 from robot.world import Pose, World
 
+PACE_SLICE_S = 0.05  # longest single wall-clock sleep while pacing a slow run
+
 
 class SegmentDistance:
     """Distance from points to the nearest of fixed segments (S, 4); the per-segment terms are
@@ -155,16 +157,24 @@ class SimRobot:
 
     # -- internals ------------------------------------------------------------------------------
     def _pace(self, duration_s: float) -> None:
-        if not self.speed:
-            self._wall_anchor = None
-            return
-        now_wall = time.monotonic()
-        if self._wall_anchor is None:
-            self._wall_anchor = (now_wall, self._t)
-        wall0, sim0 = self._wall_anchor
-        due = wall0 + (self._t + duration_s - sim0) / self.speed
-        if due > now_wall:
-            time.sleep(due - now_wall)
+        """Wait until ``duration_s`` more of sim time is due in wall time, in short slices: a speed
+        change from another thread (a stop sets None) takes effect within one slice, not after a
+        sweep that lasts half a minute at a slow speed. A change mid-wait paces this wait afresh."""
+        end = self._t + duration_s
+        while True:
+            speed = self.speed
+            if not speed:
+                self._wall_anchor = None
+                return
+            now_wall = time.monotonic()
+            anchor = self._wall_anchor
+            if anchor is None:
+                anchor = self._wall_anchor = (now_wall, self._t)
+            wall0, sim0 = anchor
+            due = wall0 + (end - sim0) / speed
+            if due <= now_wall:
+                return
+            time.sleep(min(due - now_wall, PACE_SLICE_S))
 
     def set_speed(self, speed: float | None) -> None:
         """Change the real-time factor live (None = as fast as possible)."""
