@@ -60,9 +60,10 @@ class DeadReckoning:
         kf = self._kf
         kf.x = np.array([start.theta, 0.0, 0.0])
         kf.P = np.diag([1e-8, 1e-4, cfg.initial_bias_std_rad_s**2])
+        # z = [gyro rate, turn rate]: the gyro reads rate + bias; the turn rate comes from the encoders,
+        # or is the zero-rate pseudo-measurement when the wheels are still. One H serves both, and is
+        # passed explicitly: filterpy then skips reshaping z, with the same numbers.
         kf.H = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
-        self._H_still = np.array([[0.0, 1.0, 1.0], [0.0, 1.0, 0.0]])
-        self._H_moving = kf.H  # passed explicitly: filterpy then skips reshaping z, with the same numbers
         # Filled in place at every tick (dt and the measurement variances change; the layout does not).
         kf.F = np.eye(3)
         kf.Q = np.zeros((3, 3))
@@ -156,7 +157,7 @@ class DeadReckoning:
                 # Zero-rate pseudo-measurement and the gyro together: the gyro then reads the bias.
                 z[0], z[1] = gyro_rate, 0.0
                 r[0, 0], r[1, 1] = gyro_var, cfg.zero_rate_std_rad_s**2
-                kf.update(z, R=r, H=self._H_still)
+                kf.update(z, R=r, H=kf.H)
             else:
                 innovation = gyro_rate - float(kf.x[2]) - enc_rate
                 gate = cfg.slip_gate_sigma * math.sqrt(enc_var + gyro_var + float(kf.P[2, 2]))
@@ -165,7 +166,7 @@ class DeadReckoning:
                     self.slip_events += 1
                 z[0], z[1] = gyro_rate, enc_rate
                 r[0, 0], r[1, 1] = gyro_var, enc_var
-                kf.update(z, R=r, H=self._H_moving)
+                kf.update(z, R=r, H=kf.H)
         else:
             kf.update(np.array([enc_rate]), R=np.array([[enc_var]]), H=kf.H[1:2])
         # Position: encoder distance along the mid-tick fused heading.
