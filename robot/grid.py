@@ -70,6 +70,12 @@ class GridSpec:
         iy = np.floor((np.asarray(y, dtype=float) - self.origin_y) / self.resolution).astype(np.int64)
         return self.rows - 1 - iy, col
 
+    def point_index(self, x: float, y: float) -> tuple[int, int]:
+        """``world_to_index`` for one point, on plain floats (the same arithmetic, without numpy's
+        per-call cost: hot paths ask for single points)."""
+        col = math.floor((x - self.origin_x) / self.resolution)
+        return self.rows - 1 - math.floor((y - self.origin_y) / self.resolution), col
+
     def index_to_world(
         self, row: NDArray[np.int64] | int, col: NDArray[np.int64] | int
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -246,9 +246,9 @@ class LogOddsMapper:
                 continue
             r = beam.range_m
             index, prior = arc_index[bounds[i] : bounds[i + 1]], arc_prior[bounds[i] : bounds[i + 1]]
-            # GridSpec.world_to_index, on plain floats.
-            ac = math.floor((beam.x + (r + depth) * math.cos(beam.axis_rad) - f.origin_x) / f.resolution)
-            ar = f.rows - 1 - math.floor((beam.y + (r + depth) * math.sin(beam.axis_rad) - f.origin_y) / f.resolution)
+            ar, ac = f.point_index(
+                beam.x + (r + depth) * math.cos(beam.axis_rad), beam.y + (r + depth) * math.sin(beam.axis_rad)
+            )
             if 0 <= ar < f.rows and 0 <= ac < f.cols:
                 index = np.append(index, ar * f.cols + ac)
                 prior = np.append(prior, 1.0)
@@ -389,11 +389,8 @@ class LogOddsMapper:
     def _disk(self, x: float, y: float, radius: float) -> tuple[slice, slice, NDArray[np.bool_]]:
         """The evidence cells whose centres lie within ``radius`` of (x, y): a box of them and a mask."""
         f = self.fine
-        # GridSpec.world_to_index, on plain floats.
-        c0 = math.floor((x + radius - f.origin_x) / f.resolution)
-        r0 = f.rows - 1 - math.floor((y + radius - f.origin_y) / f.resolution)
-        c1 = math.floor((x - radius - f.origin_x) / f.resolution)
-        r1 = f.rows - 1 - math.floor((y - radius - f.origin_y) / f.resolution)
+        r0, c0 = f.point_index(x + radius, y + radius)
+        r1, c1 = f.point_index(x - radius, y - radius)
         top, left = max(r0, 0), max(c1, 0)
         rows = slice(top, max(min(r1, f.rows - 1) + 1, top))  # never a negative (from the end) stop
         cols = slice(left, max(min(c0, f.cols - 1) + 1, left))
