@@ -22,30 +22,10 @@ from robot.world import Pose, World
 PACE_SLICE_S = 0.05  # longest single wall-clock sleep while pacing a slow run
 
 
-class SegmentDistance:
-    """Distance from points to the nearest of fixed segments (S, 4); the per-segment terms are
-    computed once (the simulator asks after every move)."""
-
-    def __init__(self, segs: NDArray[np.float64]) -> None:
-        self._ax = segs[None, :, 0]
-        self._ay = segs[None, :, 1]
-        self._dx = segs[None, :, 2] - self._ax
-        self._dy = segs[None, :, 3] - self._ay
-        self._len2 = np.maximum(self._dx * self._dx + self._dy * self._dy, 1e-18)
-
-    def __call__(self, px: NDArray[np.float64], py: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Distance (K,) from each point to the nearest segment."""
-        dx, dy = self._dx, self._dy
-        rx = px[:, None] - self._ax
-        ry = py[:, None] - self._ay
-        t = np.minimum(np.maximum((rx * dx + ry * dy) / self._len2, 0.0), 1.0)
-        return np.hypot(rx - t * dx, ry - t * dy).min(axis=1)
-
-
 def check_start(world: World, robot: RobotConfig) -> None:
     """Refuse a world whose start leaves the robot's body overlapping a wall or an obstacle: such a
     robot could never move, and the run would end at once with nothing mapped."""
-    clearance = float(SegmentDistance(world.segments)(np.array([world.start.x]), np.array([world.start.y]))[0])
+    clearance = float(Walls(world.segments).distance(np.array([world.start.x]), np.array([world.start.y]))[0])
     if clearance < robot.radius_m - 1e-9:
         raise WorldError(
             f"{world.name}: start ({world.start.x:g}, {world.start.y:g}) is {100 * clearance:.1f} cm from a wall "
@@ -71,9 +51,8 @@ class SimRobot:
         self.speed = speed
         self._rng = np.random.default_rng(seed)
         self._segments = world.segments
-        self._clearance = SegmentDistance(world.segments)
-        self._clear_here: float | None = None  # clearance of the body's centre [m], or a lower bound
         self._walls = Walls(world.segments)
+        self._clear_here: float | None = None  # clearance of the body's centre [m], or a lower bound
         self._dt = 1.0 / robot.imu.rate_hz  # physics tick = IMU period [s]
         self._t = 0.0  # sim clock [s]
         self._x, self._y, self._theta = world.start.x, world.start.y, world.start.theta
@@ -232,10 +211,10 @@ class SimRobot:
             elif path_m > 0.0:
                 # Every tick lies within the path length of the end point, so a clear end point with
                 # that much to spare rules out a collision without checking each tick.
-                end_clear = self._clearance(xs[-1:], ys[-1:])[0]
+                end_clear = self._walls.distance(xs[-1:], ys[-1:])[0]
                 self._clear_here = float(end_clear)
                 if end_clear < radius + path[-1]:
-                    clearance = self._clearance(xs, ys)
+                    clearance = self._walls.distance(xs, ys)
                     hit = np.flatnonzero(clearance < radius)
                     if hit.size:
                         self._clear_here = None

@@ -18,7 +18,8 @@ _EPS = 1e-12
 
 
 class Walls:
-    """A world's segments (S, 4), with the per-segment terms every ping needs computed once."""
+    """A world's segments (S, 4), with the per-segment terms every ping and every clearance check
+    needs computed once."""
 
     def __init__(self, segments: NDArray[np.float64]) -> None:
         self.segments = segments
@@ -29,6 +30,15 @@ class Walls:
         self.len2 = self.dx * self.dx + self.dy * self.dy
         self.len2_floor = np.maximum(self.len2, _EPS)
         self.length = np.sqrt(self.len2)
+        self._len2_distance = np.maximum(self.len2, 1e-18)  # the floor the clearance has always used
+
+    def distance(self, px: NDArray[np.float64], py: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Distance (K,) from each point to the nearest segment."""
+        dx, dy = self.dx, self.dy
+        rx = px[:, None] - self.x0
+        ry = py[:, None] - self.y0
+        t = np.minimum(np.maximum((rx * dx + ry * dy) / self._len2_distance, 0.0), 1.0)
+        return np.hypot(rx - t * dx, ry - t * dy).min(axis=1)
 
 
 def cone_candidates(
