@@ -115,7 +115,7 @@ class RunBody:
         self._trail: deque[list[float | None]] = deque(maxlen=TRAIL_LENGTH)
         self._deltas = StepDeltas()
         self._last: tuple[StepResult, int, dict[str, Any] | None, float | None] | None = None  # the latest step
-        self._rows: list[tuple[float, ...]] = []  # trajectory rows not yet posted
+        self._posted_rows = 0  # trajectory rows already posted with a step
 
     # -- control (any thread) --------------------------------------------------------------------
     def request_stop(self, reason: str = "stopped") -> None:
@@ -147,9 +147,7 @@ class RunBody:
         est = engine.pose
         true = hw.true_pose if isinstance(hw, SimRobot) else None
         tx, ty, tt = (true.x, true.y, true.theta) if true is not None else (math.nan, math.nan, math.nan)
-        row = (hw.now(), est.x, est.y, est.theta, tx, ty, tt)
-        self.trajectory.append(row)
-        self._rows.append(row)
+        self.trajectory.append((hw.now(), est.x, est.y, est.theta, tx, ty, tt))
 
     def _metrics(self) -> dict[str, Any] | None:
         if self.plan.truth is None:
@@ -201,7 +199,8 @@ class RunBody:
         msg = self._step_message(r, seq, metrics, explored)
         self._last = (r, seq, metrics, explored)
         self._trail.append([_num(r.pose.x, 4), _num(r.pose.y, 4)])
-        rows, self._rows = self._rows, []
+        rows = self.trajectory[self._posted_rows :]
+        self._posted_rows = len(self.trajectory)
         self.post(("step", msg, encode(msg), round(time.time(), 4), rows))
         return metrics, explored
 
