@@ -65,6 +65,7 @@ class RunManager:
 
     @property
     def _engine_in_child(self) -> bool:
+        """Whether runs' bodies run in child processes (a run's plan has the service's hardware)."""
         return self.settings.hardware == "sim" and self.settings.sim_engine == "process"
 
     def recover(self) -> None:
@@ -199,8 +200,7 @@ class RunManager:
         )
         assert self._loop is not None
         job = RunJob(record.id, plan, run_dir, self.settings.checkpoint_interval_s, self.settings.pi_config_file)
-        in_child = plan.hardware == "sim" and self._engine_in_child
-        session = RunSession(job, self.store, live, self._loop, self._on_exit, in_child)
+        session = RunSession(job, self.store, live, self._loop, self._on_exit, self._engine_in_child)
         self.sessions[record.id] = session
         self.lives[record.id] = live
         self._ended[record.id] = asyncio.Event()
