@@ -33,6 +33,8 @@ BARS = {
     "lhall": (0.94, 0.97),
     "cornered": (0.93, 0.90),
     "openhall": (0.80, 0.90),
+    "pentagon": (0.94, 0.92),
+    "heptagon": (0.93, 0.90),
 }
 # The large rooms may also end by the time limit, the paper's other rule: on the hall's seed 0
 # four frontier cells stayed while the robot visited the cells it had left, and the map did not

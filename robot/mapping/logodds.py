@@ -28,6 +28,7 @@ from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
 from robot.mapping.geometry import Cones, cones, place_beams
+from robot.mapping.tangents import TangentLines, TangentParams
 from robot.world import Pose
 
 
@@ -72,6 +73,7 @@ class LogOddsParams(BaseModel):
     # +0.004, trapezoid +0.007, room4 +0.005; at 0.1 m hexagon +0.035, room4 +0.013), room2 lost 0.003
     # (0.006 at 0.1 m), the rest moved by less than 0.001; requiring all 16 cost large rooms 0.005-0.009.
     white_min_free: float = Field(default=0.9, gt=0.0, le=1.0)
+    tangents: TangentParams = TangentParams()  # straight walls from the lines echoes are tangent to
 
 
 class _ArcStore:
@@ -159,6 +161,9 @@ class LogOddsMapper:
         self._logodds_cache: NDArray[np.float32] | None = None
         self._fine_cache: NDArray[np.int8] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
+        self._tangents = TangentLines(self._half, p.tangents) if p.tangents.enabled else None
+        self._cut = np.zeros(grid.shape, dtype=bool)  # map cells a straight wall cuts through
+        self._body = np.zeros(self.fine.shape, dtype=bool)  # evidence cells the body has been on
         # Evidence cell centres: x per column, y per row (GridSpec.index_to_world).
         self._centre_x = self.fine.index_to_world(0, np.arange(self.fine.cols))[0]
         self._centre_y = self.fine.index_to_world(np.arange(self.fine.rows), 0)[1]
@@ -258,6 +263,11 @@ class LogOddsMapper:
                 parts_prior.append(prior)
                 arc_sizes.append(index.size)
                 strength.append(p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
+        if self._tangents is not None:
+            echoes = [b for b, m in zip(beams, mapped, strict=True) if m]
+            self._tangents.add(
+                [b.x for b in echoes], [b.y for b in echoes], [b.axis_rad for b in echoes], [b.range_m for b in echoes]
+            )
         if parts_index:
             self._arcs.add(
                 np.concatenate(parts_index), np.concatenate(parts_prior), np.array(arc_sizes, dtype=np.int64), strength
@@ -401,6 +411,7 @@ class LogOddsMapper:
         rows, cols, disk = self._disk(pose.x, pose.y, self.robot.radius_m)
         F = self.free_evidence[rows, cols]
         F[disk] = np.maximum(F[disk] + self.params.l_body, self.params.free_clamp)
+        self._body[rows, cols] |= disk
         self._changed(occupied=False)
 
     def mark_contact(self, pose: Pose, direction_rad: float) -> None:
@@ -416,6 +427,26 @@ class LogOddsMapper:
 
     def finalize(self) -> None:
         self._update_support(full=True)
+        if self._tangents is not None:
+            self._cut = self._wall_cuts(self._tangents)
+
+    def _wall_cuts(self, tangents: TangentLines) -> NDArray[np.bool_]:
+        """Map cells that the straight walls the echoes agree on cut into, except where the robot's
+        body has been on the far side of the wall (then it is not a wall there: a doorway, say)."""
+        occupied = self.logodds >= self.params.occ_threshold
+        xs, ys = self.fine.centers()
+        xs, ys, body = xs[self._inner], ys[self._inner], self._body[self._inner]
+        cut = np.zeros(self.frame.grid.shape, dtype=bool)
+        for wall in tangents.lines():
+            if not tangents.on_evidence(wall, self.fine, occupied):
+                continue
+            if self.frame.extent is not None and tangents.near_box(wall, self.frame.extent):
+                continue
+            cells = tangents.cut_cells(self.frame.grid, [wall])
+            if cells.any():
+                past = body & (math.cos(wall.theta) * xs + math.sin(wall.theta) * ys > wall.d)
+                cut |= cells & ~(self._block_counts(past) > 0)
+        return cut & ~self._outside
 
     # -- belief -------------------------------------------------------------------------------
     def fine_states(self) -> NDArray[np.int8]:
@@ -459,5 +490,5 @@ class LogOddsMapper:
         free = free_frac >= self.params.white_min_free
         out = np.full(grid.shape, UNKNOWN, dtype=np.int8)
         out[free & ~self._outside] = FREE
-        out[occ | self._outside] = OCCUPIED
+        out[occ | self._outside | self._cut] = OCCUPIED
         return out

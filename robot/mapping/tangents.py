@@ -1,0 +1,238 @@
+"""Straight walls from sonar echoes: the lines that many echoes are tangent to.
+
+An echo at range r says the nearest surface in the cone touches the circle of radius r around the
+transducer. A flat wall seen from several places is tangent to all their circles, and each echo
+votes for every line tangent to its circle inside its cone, so the wall is where the votes pile up
+in (normal direction, distance) space: a Hough transform, as in Tardós et al. (2002), "Robust
+mapping and localization in indoor environments using sonar data". A point target (a corner, a
+chair leg) does not pile votes up this way unless the robot drove straight at it, and then the
+echoes meet the line at one point, which the minimum length rules out.
+
+A map cell that a wall at an angle clips at a corner can look free all the way in the evidence grid:
+beams that meet the wall at a glancing angle hear nothing and clear the floor past it, and the
+echoes that do come back place it on circular arcs, which touch a flat wall at one point only. The
+lines found here say where the wall runs, so the map cells they cut into, by more than a margin,
+are blocked. They are found once, when the run's map is finalised (the explorer never sees them).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field
+
+from robot.grid import GridSpec
+
+
+class TangentParams(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    enabled: bool = True
+    theta_step_deg: float = Field(default=1.0, gt=0.0, le=10.0)  # accumulator bin, normal direction
+    d_step_m: float = Field(default=0.02, gt=0.0)  # accumulator bin, distance
+    max_range_m: float = Field(default=1.5, gt=0.0)  # only echoes this short vote
+    min_votes: float = Field(default=15.0, gt=0.0)  # a line needs this many echoes ...
+    min_places: int = Field(default=3, ge=2)  # ... from this many places (5 cm apart) ...
+    min_length_m: float = Field(default=0.15, ge=0.0)  # ... touching it over this length
+    tolerance_m: float = Field(default=0.02, gt=0.0)  # an echo supports a line this close to tangent
+    clear_m: float = Field(default=0.05, gt=0.0)  # echoes this close to a wall found vote no more
+    max_scatter_m: float = Field(default=0.012, gt=0.0)  # rms distance of the supporting echoes
+    same_deg: float = Field(default=4.0, ge=0.0)  # lines this close in direction ...
+    same_m: float = Field(default=0.1, ge=0.0)  # ... and in distance are one wall
+    max_gap_m: float = Field(default=0.25, gt=0.0)  # a stretch without touch points this long splits a wall
+    min_spread_ratio: float = Field(default=1.0, ge=0.0)  # the stretch over the range spread
+    trim_percent: float = Field(default=5.0, ge=0.0, lt=50.0)  # touch points left off each end
+    band_m: float = Field(default=0.05, ge=0.0)  # occupied evidence this close to a line ...
+    min_on_evidence: float = Field(default=0.6, ge=0.0, le=1.0)  # ... along this share of it
+    margin_m: float = Field(default=0.015, ge=0.0)  # a cell is cut when the line passes this far into it
+
+
+@dataclass(frozen=True)
+class Line:
+    """Points p with n . p = d, n = (cos theta, sin theta) pointing from the room into the wall;
+    touched by echoes over [s0, s1] along t = (-sin theta, cos theta)."""
+
+    theta: float
+    d: float
+    s0: float
+    s1: float
+    echoes: int
+    scatter: float
+
+
+class TangentLines:
+    """Echoes collected over a run, and the straight walls they agree on."""
+
+    def __init__(self, half_beam_rad: float, params: TangentParams) -> None:
+        self.params = p = params
+        self.half = half_beam_rad
+        self._step = math.radians(p.theta_step_deg)
+        self.n_theta = max(1, round(2 * math.pi / self._step))
+        self._chunks: list[NDArray[np.float64]] = []  # per sweep: rows x, y, axis, range
+        self._x = self._y = self._axis = self._r = np.zeros(0)
+
+    def add(self, xs: list[float], ys: list[float], axes: list[float], ranges: list[float]) -> None:
+        """One sweep's echoes: transducer positions [m], beam axes [rad] and ranges [m]."""
+        echoes = np.array([xs, ys, axes, ranges], dtype=np.float64).reshape(4, -1)
+        echoes = echoes[:, echoes[3] <= self.params.max_range_m]
+        if echoes.shape[1]:
+            self._chunks.append(echoes)
+
+    def _gather(self) -> int:
+        """Join the sweeps' echoes into one array per quantity; returns how many there are."""
+        if self._chunks:
+            joined = np.concatenate([np.stack([self._x, self._y, self._axis, self._r]), *self._chunks], axis=1)
+            self._x, self._y, self._axis, self._r = joined
+            self._chunks.clear()
+        return int(self._r.size)
+
+    def lines(self) -> list[Line]:
+        """The walls the echoes so far agree on, strongest first. Each wall found takes its echoes
+        out of the vote before the next is looked for, so one wall is not found again turned by a
+        degree about the middle of its echoes."""
+        p = self.params
+        n = self._gather()
+        if n < p.min_votes:
+            return []
+        # Every echo votes for the normal directions inside its cone (one bin each), at the distance
+        # of the line tangent to its circle there, split between the two nearest distance bins.
+        span = int(math.floor(self.half / self._step))
+        offsets = np.arange(-span, span + 1)
+        axis_bin = np.rint(self._axis / self._step).astype(np.int64)
+        tb = (axis_bin[:, None] + offsets[None, :]) % self.n_theta  # (echo, vote)
+        theta = tb * self._step
+        d = np.cos(theta) * self._x[:, None] + np.sin(theta) * self._y[:, None] + self._r[:, None]
+        pos = d / p.d_step_m
+        lo = np.floor(pos)
+        frac = pos - lo
+        d0 = float(lo.min())
+        n_d = int(lo.max() - d0) + 2
+        acc = np.zeros(self.n_theta * n_d)
+        base = tb * n_d + (lo - d0).astype(np.int64)
+        np.add.at(acc, base.ravel(), (1.0 - frac).ravel())
+        np.add.at(acc, (base + 1).ravel(), frac.ravel())
+        free = np.ones(n, dtype=bool)  # echoes no wall has taken yet
+        found: list[Line] = []
+        tried = np.zeros(acc.size, dtype=bool)
+        while True:
+            peak = int(np.argmax(np.where(tried, 0.0, acc)))
+            if acc[peak] < p.min_votes:
+                return found
+            tried[peak] = True
+            t_i, d_i = divmod(peak, n_d)
+            walls, near = self._refine(t_i * self._step, (d_i + d0) * p.d_step_m, free)
+            if not walls:
+                continue
+            # A line close to a stronger one and nearly parallel is the same wall, seen while the
+            # pose was a few centimetres off: it says nothing new, and would cut the floor in front.
+            found.extend(w for w in walls if not any(self._same(w, o) for o in found))
+            line = walls[0]
+            # The echoes near the wall, a little wider than those that fit it: noisier echoes of the
+            # same wall would otherwise make a second wall beside it.
+            c, s = math.cos(line.theta), math.sin(line.theta)
+            dist = c * self._x + s * self._y + self._r
+            facing = np.abs(np.remainder(line.theta - self._axis + math.pi, 2 * math.pi) - math.pi) <= self.half
+            near = free & facing & (np.abs(dist - line.d) <= p.clear_m)
+            free &= ~near
+            np.subtract.at(acc, base[near].ravel(), (1.0 - frac[near]).ravel())
+            np.subtract.at(acc, (base[near] + 1).ravel(), frac[near].ravel())
+
+    def _same(self, a: Line, b: Line) -> bool:
+        p = self.params
+        return (
+            abs(math.remainder(a.theta - b.theta, 2 * math.pi)) <= math.radians(p.same_deg)
+            and abs(a.d - b.d) <= p.same_m
+        )
+
+    def near_box(self, line: Line, extent: tuple[float, float, float, float]) -> bool:
+        """Whether ``line`` is one of the room box's own walls (the map already has those)."""
+        min_x, min_y, max_x, max_y = extent
+        edges = ((0.0, max_x), (math.pi / 2, max_y), (math.pi, -min_x), (-math.pi / 2, -min_y))
+        return any(self._same(line, Line(theta, d, 0.0, 0.0, 0, 0.0)) for theta, d in edges)
+
+    def _refine(self, theta: float, d: float, free: NDArray[np.bool_]) -> tuple[list[Line], NDArray[np.bool_]]:
+        """The line near (theta, d) that the most ``free`` echoes fit, as the stretches of wall
+        they touch, and the echoes that support it."""
+        p = self.params
+        best: tuple[float, float, float, NDArray[np.bool_]] | None = None  # theta, d, score, echoes
+        for th in theta + np.radians(np.arange(-1.0, 1.01, 0.1)):
+            inside = free & (np.abs(np.remainder(th - self._axis + math.pi, 2 * math.pi) - math.pi) <= self.half)
+            dist = math.cos(th) * self._x + math.sin(th) * self._y + self._r
+            near = inside & (np.abs(dist - d) <= p.tolerance_m)
+            if np.count_nonzero(near) < p.min_votes:
+                continue
+            centre = float(np.median(dist[near]))
+            near = inside & (np.abs(dist - centre) <= p.tolerance_m)
+            # Many echoes close to the line: a turned line that keeps only the closest few of them
+            # scatters less but is not the wall.
+            score = float(np.sum(1.0 - ((dist[near] - centre) / p.tolerance_m) ** 2))
+            if best is None or score > best[2]:
+                best = (float(th), centre, score, near)
+        if best is None:
+            return [], np.zeros_like(free)
+        th, centre, _, near = best
+        c, s = math.cos(th), math.sin(th)
+        dist = c * self._x[near] + s * self._y[near] + self._r[near]
+        if float(np.sqrt(np.mean((dist - centre) ** 2))) > p.max_scatter_m:
+            return [], near
+        fx = self._x[near] + self._r[near] * c  # where each echo touches the line
+        fy = self._y[near] + self._r[near] * s
+        along = -s * fx + c * fy
+        order = np.argsort(along, kind="stable")
+        # A wall with a doorway in it is two walls: split where no echo touched the line for a while.
+        pieces = np.split(order, np.flatnonzero(np.diff(along[order]) > p.max_gap_m) + 1)
+        idx = np.flatnonzero(near)
+        walls = []
+        for piece in pieces:
+            if piece.size < p.min_votes:
+                continue
+            sel = idx[piece]
+            places = np.unique(np.stack([np.rint(self._x[sel] / 0.05), np.rint(self._y[sel] / 0.05)]), axis=1).shape[1]
+            # Where the wall is: the touch points without the outer few, which near a corner may be
+            # the neighbouring wall's echoes that happen to fit.
+            s0, s1 = (float(v) for v in np.percentile(along[piece], [p.trim_percent, 100.0 - p.trim_percent]))
+            # Echoes from places in a row towards one point agree on lines turned a little off the
+            # row too, touching them over a stretch that grows with the range they span; a wall seen
+            # while driving along it spans a longer stretch than ranges.
+            r0, r1 = np.percentile(self._r[sel], [p.trim_percent, 100.0 - p.trim_percent])
+            if places < p.min_places or s1 - s0 < max(p.min_length_m, p.min_spread_ratio * float(r1 - r0)):
+                continue
+            scatter = float(np.sqrt(np.mean((dist[piece] - centre) ** 2)))
+            walls.append(Line(th, centre, s0, s1, int(piece.size), scatter))
+        return walls, near
+
+    def on_evidence(self, line: Line, fine: GridSpec, occupied: NDArray[np.bool_]) -> bool:
+        """Whether the evidence grid shows a surface along ``line``: an occupied cell within a few
+        centimetres of it along most of its length. A line that echoes agree on by chance (around
+        round furniture, or from places in a row) runs mostly through open floor."""
+        p = self.params
+        c, s = math.cos(line.theta), math.sin(line.theta)
+        along = np.arange(line.s0, line.s1 + 1e-9, 0.5 * fine.resolution)
+        hits = np.zeros(along.size, dtype=bool)
+        for depth in np.arange(-p.band_m, p.band_m + 1e-9, 0.5 * fine.resolution):
+            rows, cols = fine.world_to_index((line.d + depth) * c - along * s, (line.d + depth) * s + along * c)
+            inside = fine.contains_index(rows, cols)
+            hits |= inside & occupied[np.clip(rows, 0, fine.rows - 1), np.clip(cols, 0, fine.cols - 1)]
+        return float(np.mean(hits)) >= p.min_on_evidence
+
+    def cut_cells(self, grid: GridSpec, lines: list[Line]) -> NDArray[np.bool_]:
+        """Map cells that a line's touched stretch crosses, reaching at least ``margin_m`` past the
+        line into the wall."""
+        out = np.zeros(grid.shape, dtype=bool)
+        if not lines:
+            return out
+        res = grid.resolution
+        xs, ys = grid.centers()
+        half = 0.5 * res
+        for line in lines:
+            c, s = math.cos(line.theta), math.sin(line.theta)
+            depth = c * xs + s * ys - line.d  # > 0: inside the wall
+            reach = half * (abs(c) + abs(s))  # how far a cell's corners reach from its centre
+            along = -s * xs + c * ys
+            cut = (depth - reach < 0.0) & (depth + reach >= self.params.margin_m)
+            cut &= (along >= line.s0 - half) & (along <= line.s1 + half)
+            out |= cut
+        return out

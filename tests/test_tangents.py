@@ -1,0 +1,114 @@
+"""Straight walls from the lines sonar echoes are tangent to (robot.mapping.tangents)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from robot.grid import GridSpec
+from robot.mapping.tangents import Line, TangentLines, TangentParams
+
+HALF = math.radians(15.0)
+
+
+def _echoes_off_line(theta: float, d: float, places: list[tuple[float, float]], rng: np.random.Generator, std: float):
+    """Echoes of the wall n . p = d (n at ``theta``) from ``places``, by beams whose cones hold the
+    wall's normal (axes off it by up to 12 degrees): the range is the distance to the wall."""
+    xs, ys, axes, ranges = [], [], [], []
+    for x, y in places:
+        for off in (-12.0, -4.0, 7.0):
+            xs.append(x)
+            ys.append(y)
+            axes.append(theta + math.radians(off))
+            ranges.append(d - (math.cos(theta) * x + math.sin(theta) * y) + rng.normal(0.0, std))
+    return xs, ys, axes, ranges
+
+
+def test_a_wall_at_an_angle_is_found_where_it_runs() -> None:
+    rng = np.random.default_rng(0)
+    theta, d = math.radians(20.0), 2.0  # a wall facing a robot that drives along it
+    t = (-math.sin(theta), math.cos(theta))
+    places = []
+    for s in np.arange(-0.6, 0.61, 0.2):
+        foot = (d * math.cos(theta) + s * t[0], d * math.sin(theta) + s * t[1])
+        for dist in (0.5, 0.8):
+            places.append((foot[0] - dist * math.cos(theta), foot[1] - dist * math.sin(theta)))
+    lines = TangentLines(HALF, TangentParams(enabled=True))
+    lines.add(*_echoes_off_line(theta, d, places, rng, 0.01))
+    found = lines.lines()
+    assert len(found) == 1
+    wall = found[0]
+    assert abs(math.degrees(math.remainder(wall.theta - theta, 2 * math.pi))) <= 1.0
+    assert abs(wall.d - d) <= 0.01
+    assert wall.s0 <= -0.45 and wall.s1 >= 0.45  # the stretch the echoes touched
+
+
+def test_echoes_of_one_point_from_places_in_a_row_make_no_wall() -> None:
+    """Driving straight at a chair leg: every echo is tangent to the line across the approach at
+    the leg, but they all touch it at one point."""
+    leg = np.array([2.0, 1.0])
+    xs, ys, axes, ranges = [], [], [], []
+    for dist in np.arange(0.3, 1.5, 0.05):
+        for off in (-10.0, 0.0, 10.0):
+            xs.append(float(leg[0] - dist))
+            ys.append(float(leg[1]))
+            axes.append(math.radians(off))
+            ranges.append(float(dist))
+    lines = TangentLines(HALF, TangentParams(enabled=True))
+    lines.add(xs, ys, axes, ranges)
+    assert lines.lines() == []
+
+
+def test_long_echoes_do_not_vote() -> None:
+    lines = TangentLines(HALF, TangentParams(enabled=True, max_range_m=1.0))
+    lines.add([0.0] * 20, [0.0] * 20, [0.0] * 20, [1.5] * 20)
+    assert lines.lines() == []
+
+
+def test_a_cell_is_cut_when_the_wall_reaches_past_the_margin_into_it() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 3, 3)
+    lines = TangentLines(HALF, TangentParams(enabled=True, margin_m=0.015))
+    # A vertical wall at x = 0.39, facing -x... i.e. n = (+1, 0) points into the wall: the wall
+    # fills x > 0.39. It crosses the middle column's cells (0.2-0.4) 1 cm from their edge: less
+    # than the margin, so they stay; at x = 0.37 it reaches 3 cm into them.
+    near_edge = Line(theta=0.0, d=0.39, s0=0.0, s1=0.6, echoes=10, scatter=0.01)
+    assert not lines.cut_cells(grid, [near_edge]).any()
+    inside = Line(theta=0.0, d=0.37, s0=0.0, s1=0.6, echoes=10, scatter=0.01)
+    cut = lines.cut_cells(grid, [inside])
+    assert cut[:, 1].all() and not cut[:, 0].any() and not cut[:, 2].any()
+    # Only along the stretch the echoes touched, give or take half a cell: not the row at y = 0.5.
+    short = Line(theta=0.0, d=0.37, s0=0.0, s1=0.25, echoes=10, scatter=0.01)
+    _, ys = grid.centers()
+    assert lines.cut_cells(grid, [short])[:, 1].tolist() == (ys[:, 1] < 0.4).tolist()
+
+
+def test_a_line_must_run_along_occupied_evidence() -> None:
+    fine = GridSpec(0.0, 0.0, 0.05, 40, 40)
+    occupied = np.zeros(fine.shape, dtype=bool)
+    occupied[:, 20] = True  # a wall at x = 1.0-1.05
+    lines = TangentLines(HALF, TangentParams(enabled=True))
+    along_wall = Line(theta=0.0, d=1.0, s0=0.2, s1=1.8, echoes=10, scatter=0.01)
+    across_floor = Line(theta=0.0, d=0.5, s0=0.2, s1=1.8, echoes=10, scatter=0.01)
+    assert lines.on_evidence(along_wall, fine, occupied)
+    assert not lines.on_evidence(across_floor, fine, occupied)
+
+
+def test_straight_walls_recover_cells_that_angled_walls_clip() -> None:
+    """A room whose walls all run at angles: without the walls found from tangents, cells that a
+    wall clips at a corner stay white (the truth calls them blocked); with them the map finds them."""
+    from robot.runner import simulate
+    from robot.settings import load_run_config
+    from robot.world import load_world
+
+    cfg = load_run_config()
+    world = load_world("pentagon")
+    off = cfg.slam.model_copy(
+        update={"logodds": cfg.slam.logodds.model_copy(update={"tangents": TangentParams(enabled=False)})}
+    )
+    with_walls = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    without = simulate(world, cfg.robot, cfg.noise, off, seed=0)
+    # The walls only change the final map, never the run itself.
+    assert with_walls.trajectory == without.trajectory
+    assert with_walls.metrics.recall > without.metrics.recall
+    assert with_walls.metrics.f1 > without.metrics.f1
