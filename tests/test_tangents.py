@@ -68,7 +68,7 @@ def test_long_echoes_do_not_vote() -> None:
 
 def test_a_cell_is_cut_when_the_wall_reaches_past_the_margin_into_it() -> None:
     grid = GridSpec(0.0, 0.0, 0.2, 3, 3)
-    lines = TangentLines(HALF, TangentParams(enabled=True, margin_m=0.015))
+    lines = TangentLines(HALF, TangentParams(enabled=True, margin_m=0.015, min_axis_angle_deg=0.0))
     # A vertical wall at x = 0.39, facing -x... i.e. n = (+1, 0) points into the wall: the wall
     # fills x > 0.39. It crosses the middle column's cells (0.2-0.4) 1 cm from their edge: less
     # than the margin, so they stay; at x = 0.37 it reaches 3 cm into them.
@@ -81,6 +81,11 @@ def test_a_cell_is_cut_when_the_wall_reaches_past_the_margin_into_it() -> None:
     short = Line(theta=0.0, d=0.37, s0=0.0, s1=0.25, echoes=10, scatter=0.01)
     _, ys = grid.centers()
     assert lines.cut_cells(grid, [short])[:, 1].tolist() == (ys[:, 1] < 0.4).tolist()
+    # By default a face along an axis is left to the evidence grid; turned by 5 degrees it is not.
+    default = TangentLines(HALF, TangentParams(enabled=True))
+    assert not default.cut_cells(grid, [inside]).any()
+    turned = Line(theta=math.radians(5.0), d=0.37, s0=0.0, s1=0.6, echoes=10, scatter=0.01)
+    assert default.cut_cells(grid, [turned])[:, 1].any()
 
 
 def test_a_line_must_run_along_occupied_evidence() -> None:
