@@ -10,6 +10,7 @@ explains (slip, bumps), the encoder variance is inflated: Borenstein & Feng's gy
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,7 +18,7 @@ from filterpy.kalman import KalmanFilter
 from pydantic import BaseModel, ConfigDict, Field
 
 from robot.config import RobotConfig
-from robot.hardware import EncoderCounts, ImuSample
+from robot.hardware import EncoderCounts, ImuSample, gyro_rates
 from robot.world import Pose
 
 
@@ -110,7 +111,9 @@ class DeadReckoning:
         self._last_counts = (counts.left, counts.right)
         self._last_t = counts.t_s
 
-    def update(self, counts: EncoderCounts, imu: list[ImuSample], wheels_commanded: bool = False) -> PoseEstimate:
+    def update(
+        self, counts: EncoderCounts, imu: Sequence[ImuSample], wheels_commanded: bool = False
+    ) -> PoseEstimate:
         """Advance the estimate to ``counts.t_s`` with the IMU samples taken since the last update.
 
         ``wheels_commanded`` says whether the wheels were driven during the interval: at low speed a
@@ -149,7 +152,7 @@ class DeadReckoning:
         enc_var = max((self._enc_yaw_quantum / dt) ** 2 / 3.0, cfg.encoder_rate_std_floor_rad_s**2)
         if imu:
             # np.mean's own arithmetic (one pairwise sum, then a division), without its overhead.
-            gyro_rate = float(np.add.reduce(np.array([s.gyro_z_rad_s for s in imu]))) / len(imu)
+            gyro_rate = float(np.add.reduce(gyro_rates(imu))) / len(imu)
             gyro_var = cfg.gyro_noise_std_rad_s**2 / len(imu)
             still = dl_counts == 0 and dr_counts == 0 and not wheels_commanded
             z, r = self._z2, self._R2

@@ -13,7 +13,7 @@ from robot.engine import SlamEngine, classify
 from robot.errors import ConfigError
 from robot.explore import CLOCKWISE, Explorer, direction_index
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
-from robot.hardware import EncoderCounts, ImuSample
+from robot.hardware import EncoderCounts, ImuBatch, ImuSample
 from robot.localization import DeadReckoning
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame
@@ -95,6 +95,24 @@ def test_driving_straight_integrates_encoder_distance_along_the_heading() -> Non
     est = dr.estimate
     assert est.x == pytest.approx(1.0, abs=1e-6)
     assert est.y == pytest.approx(2.0 + 50 * ROBOT.metres_per_count, abs=1e-6)
+
+
+def test_samples_in_arrays_give_the_same_estimate_as_samples_one_by_one() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(1, 201) * 0.01
+    gyro = 0.3 + 0.002 * rng.standard_normal(200)
+    batch = ImuBatch(t, gyro)
+    assert list(batch) == [ImuSample(float(a), float(b)) for a, b in zip(t, gyro, strict=True)]
+    assert batch[3] == ImuSample(float(t[3]), float(gyro[3])) and len(batch[10:30]) == 20
+    one_by_one, in_arrays = (DeadReckoning(ROBOT, Pose(0.0, 0.0, 0.0)) for _ in range(2))
+    for dr in (one_by_one, in_arrays):
+        dr.reset_origin(EncoderCounts(0.0, 0, 0))
+    for k in range(10):
+        tick = slice(20 * k, 20 * (k + 1))
+        counts = EncoderCounts(float(t[tick][-1]), -3 * (k + 1), 3 * (k + 1))
+        a = one_by_one.update(counts, list(batch[tick]), wheels_commanded=True)
+        b = in_arrays.update(counts, batch[tick], wheels_commanded=True)
+        assert a == b  # bit for bit
 
 
 # -- mappers -----------------------------------------------------------------------------------
