@@ -76,13 +76,15 @@ class LogOddsParams(BaseModel):
 
 class _ArcStore:
     """Every echo's arc, flattened into growing arrays: per arc cell its slot (a compact number for
-    each fine cell any arc has touched) and prior; per echo its start offset and strength."""
+    each fine cell any arc has touched), prior and the echo's evidence; per echo its start offset and
+    size."""
 
     def __init__(self, n_cells: int) -> None:
         self.slots = np.zeros(4096, dtype=np.int64)
         self.prior = np.zeros(4096)
+        self.evidence = np.zeros(4096)  # the echo's occupied evidence, on each of its cells
         self.starts = np.zeros(512, dtype=np.int64)
-        self.strength = np.zeros(512)
+        self.sizes = np.zeros(512, dtype=np.int64)
         self.n_cells = 0
         self.n_arcs = 0
         self._slot_of = np.full(n_cells, -1, dtype=np.int64)  # fine cell -> slot
@@ -95,9 +97,9 @@ class _ArcStore:
         return self._touched[: self.n_touched]
 
     def add(
-        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: NDArray[np.int64], strength: list[float]
+        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: NDArray[np.int64], evidence: list[float]
     ) -> None:
-        """Append arcs: ``cells`` and ``prior`` hold them end to end, ``sizes`` and ``strength`` one
+        """Append arcs: ``cells`` and ``prior`` hold them end to end, ``sizes`` and ``evidence`` one
         entry per arc. New cells get slots arc by arc, in increasing cell order within an arc."""
         unseen = self._slot_of[cells] < 0
         new, first = np.unique(cells[unseen], return_index=True)
@@ -113,14 +115,16 @@ class _ArcStore:
             size = max(2 * self.slots.size, self.n_cells + n)
             self.slots = np.resize(self.slots, size)
             self.prior = np.resize(self.prior, size)
+            self.evidence = np.resize(self.evidence, size)
         if self.n_arcs + m > self.starts.size:
             size = max(2 * self.starts.size, self.n_arcs + m)
             self.starts = np.resize(self.starts, size)
-            self.strength = np.resize(self.strength, size)
+            self.sizes = np.resize(self.sizes, size)
         self.slots[self.n_cells : self.n_cells + n] = self._slot_of[cells]
         self.prior[self.n_cells : self.n_cells + n] = prior
+        self.evidence[self.n_cells : self.n_cells + n] = np.repeat(evidence, sizes)
         self.starts[self.n_arcs : self.n_arcs + m] = self.n_cells + np.cumsum(sizes) - sizes
-        self.strength[self.n_arcs : self.n_arcs + m] = strength
+        self.sizes[self.n_arcs : self.n_arcs + m] = sizes
         self.n_cells += n
         self.n_arcs += m
 
@@ -152,7 +156,8 @@ class LogOddsMapper:
         self._arcs = _ArcStore(self.fine.rows * self.fine.cols)
         self._support: NDArray[np.float64] | None = None  # per slot, from the last full re-sharing
         self._support_arcs = 0  # arcs covered by it
-        self._recent: NDArray[np.float64] | None = None  # per slot, the echoes since
+        # The echoes since, shared: the slots they touch (sorted) and the evidence on each.
+        self._recent: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
         self._occ_base: NDArray[np.float32] | None = None  # bumps plus the last full sharing
         self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
@@ -257,7 +262,7 @@ class LogOddsMapper:
                 parts_index.append(index)
                 parts_prior.append(prior)
                 arc_sizes.append(index.size)
-                strength.append(p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
+                strength.append(p.l_occ * (p.occ_far_weight + (1.0 - p.occ_far_weight) * near))
         if parts_index:
             self._arcs.add(
                 np.concatenate(parts_index), np.concatenate(parts_prior), np.array(arc_sizes, dtype=np.int64), strength
@@ -265,34 +270,53 @@ class LogOddsMapper:
         self._sweeps_since_full += 1
         self._update_support(full=False)
 
-    def _attribute(self, first_arc: int, support: NDArray[np.float64] | None, rounds: int) -> NDArray[np.float64]:
+    def _attribute(
+        self,
+        first_arc: int,
+        support: NDArray[np.float64] | None,
+        rounds: int,
+        subset: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+    ) -> NDArray[np.float64]:
         """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support`` (none: zero).
 
-        Works per slot (see ``_ArcStore``), so the cost follows the arcs, not the size of the map."""
+        Works per slot (see ``_ArcStore``), so the cost follows the arcs, not the size of the map:
+        over every slot when ``subset`` is None, else over the slots it lists (sorted, holding all of
+        the arcs' slots) with each arc cell's place among them. Returns the evidence per slot of
+        that subset."""
         arcs = self._arcs
         lo = int(arcs.starts[first_arc])
         hi = arcs.n_cells
         slots = arcs.slots[lo:hi]
-        n = arcs.n_touched
+        touched = arcs.touched
+        space = None
+        if subset is not None:  # slots numbered within the subset
+            space, slots = subset
+            touched = touched[space]
+        n = touched.size
         starts = arcs.starts[first_arc : arcs.n_arcs] - lo
-        sizes = np.diff(np.append(starts, hi - lo))
-        strength = self.params.l_occ * np.repeat(arcs.strength[first_arc : arcs.n_arcs], sizes)
-        free = self.free_evidence.reshape(-1)[arcs.touched]
-        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * free[slots])
+        sizes = arcs.sizes[first_arc : arcs.n_arcs]
+        strength = arcs.evidence[lo:hi]
+        free = self.free_evidence.reshape(-1)[touched]
+        # Every term that depends on the slot alone is computed once per slot, then gathered.
+        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * free)[slots]
         before = np.zeros(n)
         if support is not None:
-            before[: support.size] = support
+            if space is None:
+                before[: support.size] = support
+            else:
+                known = int(np.searchsorted(space, support.size))  # the slots the last full sharing saw
+                before[:known] = support[space[:known]]
         # An echo whose arc reaches the room's wall is most likely the wall: the cells beyond the box
         # count as supported, which explains away the arc's cells in the room.
-        before += self.params.boundary_support * self._beyond_box[arcs.touched]
+        before += self.params.boundary_support * self._beyond_box[touched]
         own: NDArray[np.float64] = np.zeros(n)
         gain, cap = self.params.explain_gain, self.params.explain_cap
-        for _ in range(rounds + 1):
-            w = base * np.exp(gain * np.minimum(before[slots] + own[slots], cap))
-            wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
-            own = np.bincount(slots, weights=strength * w / np.maximum(wmax, 1e-12), minlength=n).astype(
-                np.float64, copy=False
-            )
+        for k in range(rounds + 1):
+            # The first round has nothing of its own to add; a gain of 1 needs no multiplication.
+            e = np.minimum(before + own if k else before, cap)
+            w = base * np.exp(gain * e if gain != 1.0 else e)[slots]
+            wmax = np.repeat(np.maximum(np.maximum.reduceat(w, starts), 1e-12), sizes)
+            own = np.bincount(slots, weights=strength * w / wmax, minlength=n).astype(np.float64, copy=False)
         return own
 
     def _update_support(self, full: bool) -> None:
@@ -314,7 +338,9 @@ class LogOddsMapper:
             self._recent = None
             self._occ_base = None
         elif arcs.n_arcs > self._support_arcs:
-            self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
+            # Only the slots of the new arcs: a few hundred cells, against thousands ever touched.
+            space = np.unique(arcs.slots[arcs.starts[self._support_arcs] : arcs.n_cells], return_inverse=True)
+            self._recent = (space[0], self._attribute(self._support_arcs, self._support, p.explain_rounds, space))
         self._changed()
 
     def _changed(self, occupied: bool = True) -> None:
@@ -339,8 +365,9 @@ class LogOddsMapper:
                     self._occ_base.reshape(-1)[cells] = contact[cells] + self._support.astype(np.float32)
             occ = self._occ_base.copy()
             if self._recent is not None and self._support is not None:  # the echoes since, on their cells
-                slots = np.flatnonzero(self._recent)
-                total = self._recent[slots]
+                space, recent = self._recent
+                nonzero = np.flatnonzero(recent)
+                slots, total = space[nonzero], recent[nonzero]
                 total[slots < self._support.size] += self._support[slots[slots < self._support.size]]
                 cells = self._arcs.touched[slots]
                 occ.reshape(-1)[cells] = contact[cells] + total.astype(np.float32)
