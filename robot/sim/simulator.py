@@ -162,8 +162,10 @@ class SimRobot:
 
     def _ping(self, idx: NDArray[np.int64]) -> NDArray[np.float64]:
         c, s = math.cos(self._theta), math.sin(self._theta)
-        mxy = self._mount_xy[idx]
-        origins = np.column_stack([self._x + c * mxy[:, 0] - s * mxy[:, 1], self._y + s * mxy[:, 0] + c * mxy[:, 1]])
+        mx, my = self._mount_xy[idx].T
+        origins = np.empty((idx.size, 2))
+        origins[:, 0] = self._x + c * mx - s * my
+        origins[:, 1] = self._y + s * mx + c * my
         bearings = self._theta + self._mount_bearing[idx]
         dist, inc, points = cone_candidates(self._walls, origins, bearings, self._half_beam)
         segs = self._segments
