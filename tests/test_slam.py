@@ -214,6 +214,29 @@ def test_the_log_odds_map_does_not_depend_on_when_it_is_read() -> None:
     assert np.array_equal(a.states(), b.states())
 
 
+@pytest.mark.parametrize("resolution", [0.05, 0.1, 0.2, 1.0])
+def test_map_cells_count_their_evidence_cells_like_the_block_means(resolution: float) -> None:
+    # One evidence cell per map cell (0.05 m) up to 400 (1.0 m, more than a byte holds).
+    grid = GridSpec(0.0, 0.0, resolution, round(2.0 / resolution), round(2.0 / resolution))
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 1.9, 2.0))
+    mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(resolution=resolution))
+    assert isinstance(mapper, LogOddsMapper)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        mapper.integrate(Pose(*rng.uniform(0.5, 1.5, 2), rng.uniform(-3, 3)), rng.uniform(0.1, 2.0, 8))
+    fine, k = mapper.fine_states(), mapper.k
+    blocks = fine.reshape(grid.rows, k, grid.cols, k)
+    outside = mapper._fine_outside.reshape(grid.rows, k, grid.cols, k)
+    some_occupied = ((blocks == OCCUPIED) & ~outside).any(axis=(1, 3))
+    free_share = ((blocks == FREE) | outside).mean(axis=(1, 3))
+    expected = np.full(grid.shape, UNKNOWN, dtype=np.int8)
+    expected[(free_share >= 0.9) & ~mapper._outside] = FREE
+    expected[some_occupied | mapper._outside] = OCCUPIED
+    assert np.array_equal(mapper.states(), expected)
+    occupied = (blocks == OCCUPIED).any(axis=(1, 3)) | mapper._outside
+    assert np.array_equal(mapper.free_fraction(), np.where(occupied, -1.0, (blocks == FREE).mean(axis=(1, 3))))
+
+
 def test_classify_reads_the_belief_like_the_ground_truth() -> None:
     belief = np.array(
         [

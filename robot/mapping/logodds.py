@@ -163,6 +163,7 @@ class LogOddsMapper:
         self._occ_cache: NDArray[np.float32] | None = None
         self._logodds_cache: NDArray[np.float32] | None = None
         self._fine_cache: NDArray[np.int8] | None = None
+        self._counts_cache: NDArray[np.uint8] | NDArray[np.int32] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         # Evidence cell centres: x per column, y per row (GridSpec.index_to_world).
         self._centre_x = self.fine.index_to_world(0, np.arange(self.fine.cols))[0]
@@ -181,6 +182,9 @@ class LogOddsMapper:
         else:
             self._fine_outside = np.zeros((grid.rows * self.k, grid.cols * self.k), dtype=bool)
             self._near_extent = self._fine_outside
+        # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
+        # there come from the wall, and the floor up to it is free.
+        self._wall_face = self._near_extent & ~self._fine_outside
 
     def _fine_outside_extent(self, extent: tuple[float, float, float, float], margin_m: float) -> NDArray[np.bool_]:
         """Fine cells of the map's area whose centre lies outside the room box shrunk by ``margin_m``."""
@@ -349,6 +353,7 @@ class LogOddsMapper:
             self._occ_cache = None
         self._logodds_cache = None
         self._fine_cache = None
+        self._counts_cache = None
 
     def occupied_evidence(self) -> NDArray[np.float32]:
         """Every echo's evidence, shared over its arc by the free evidence gathered so far.
@@ -454,35 +459,61 @@ class LogOddsMapper:
         out = np.full(L.shape, UNKNOWN, dtype=np.int8)
         out[L >= p.occ_threshold] = OCCUPIED
         out[L <= p.free_threshold] = FREE
-        # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
-        # there come from the wall, and the floor up to it is free.
-        out[self._near_extent & ~self._fine_outside] = FREE
+        out[self._wall_face] = FREE
         self._fine_cache = out
         return out
 
-    def _block_counts(self, mask: NDArray[np.bool_]) -> NDArray[np.int8] | NDArray[np.int32]:
-        """Per map cell, how many of its k x k evidence cells ``mask`` holds (summed over the rows of a
-        block, then its columns: two contiguous reductions instead of one over two strided axes)."""
+    def _block_counts(self, masks: NDArray[np.bool_]) -> NDArray[np.uint8] | NDArray[np.int32]:
+        """Per map cell, how many of its k x k evidence cells each of ``masks`` (m, rows * k, cols * k)
+        holds, (m, rows, cols): the k rows of each block added, then its k columns (slices added in
+        bytes, while a block's count fits in one; cheaper than numpy's sum, which casts)."""
         grid = self.frame.grid
         k = self.k
+        cells = masks.view(np.uint8) if k * k <= 255 else masks.astype(np.int32)
         if k == 1:  # one evidence cell per map cell: the mask is the count
-            return mask.view(np.int8)
-        rows = mask.reshape(grid.rows, k, grid.cols * k).sum(axis=1, dtype=np.int32)
-        return rows.reshape(grid.rows, grid.cols, k).sum(axis=2, dtype=np.int32)
+            return cells
+        m = masks.shape[0]
+        by_row = cells.reshape(m, grid.rows, k, grid.cols * k)
+        rows = by_row[:, :, 0] + by_row[:, :, 1]
+        for i in range(2, k):
+            rows += by_row[:, :, i]
+        by_col = rows.reshape(m, grid.rows, grid.cols, k)
+        counts = by_col[..., 0] + by_col[..., 1]
+        for i in range(2, k):
+            counts += by_col[..., i]
+        return counts
+
+    def _cell_counts(self) -> NDArray[np.uint8] | NDArray[np.int32]:
+        """Per map cell, its evidence cells that are occupied, occupied inside the room box, free,
+        and free or outside the box (4, rows, cols): counted together, once per change. Occupied and
+        free are what ``fine_states`` calls them (the thresholds lie either side of zero)."""
+        if self._counts_cache is None:
+            p = self.params
+            L = self.logodds[self._inner]
+            masks = np.empty((4, *L.shape), dtype=bool)
+            occupied, occupied_inside, free, free_or_outside = masks
+            np.greater_equal(L, p.occ_threshold, out=occupied)
+            occupied &= ~self._wall_face
+            np.logical_and(occupied, ~self._fine_outside, out=occupied_inside)
+            np.less_equal(L, p.free_threshold, out=free)
+            free |= self._wall_face
+            np.logical_or(free, self._fine_outside, out=free_or_outside)
+            self._counts_cache = self._block_counts(masks)
+        return self._counts_cache
 
     def free_fraction(self) -> NDArray[np.float64]:
-        fine = self.fine_states()
-        occ = (self._block_counts(fine == OCCUPIED) > 0) | self._outside
+        counts = self._cell_counts()
+        occ = (counts[0] > 0) | self._outside
         # A count over k * k is exactly what the mean of the block's booleans gives.
-        return np.where(occ, -1.0, self._block_counts(fine == FREE) / (self.k * self.k))
+        return np.where(occ, -1.0, counts[2] / (self.k * self.k))
 
     def states(self) -> NDArray[np.int8]:
         grid = self.frame.grid
-        fine = self.fine_states()
-        occ = self._block_counts((fine == OCCUPIED) & ~self._fine_outside) > 0
+        counts = self._cell_counts()
+        occ = counts[1] > 0
         # White needs no occupied evidence and nearly all of the cell seen free: a strip along an
         # obstacle's face that no beam could clear without touching the face may stay unseen.
-        free_frac = self._block_counts((fine == FREE) | self._fine_outside) / (self.k * self.k)
+        free_frac = counts[3] / (self.k * self.k)
         free = free_frac >= self.params.white_min_free
         out = np.full(grid.shape, UNKNOWN, dtype=np.int8)
         out[free & ~self._outside] = FREE
