@@ -18,6 +18,7 @@ occupied and white only if all of it is free, which keeps white cells safe.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -96,21 +97,31 @@ class _ArcStore:
         """The fine cell of every slot."""
         return self._touched[: self.n_touched]
 
+    def subset(self, first_arc: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """The slots that arcs ``first_arc..`` touch, in increasing order, and each of their cells'
+        place among them (what np.unique with return_inverse gives, without a sort)."""
+        slots = self.slots[self.starts[first_arc] : self.n_cells]
+        seen = np.zeros(self.n_touched, dtype=bool)
+        seen[slots] = True
+        space = np.flatnonzero(seen)
+        place = np.empty(self.n_touched, dtype=np.int64)
+        place[space] = np.arange(space.size)
+        return space, place[slots]
+
     def add(
-        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: NDArray[np.int64], evidence: list[float]
+        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: list[int], evidence: list[float]
     ) -> None:
         """Append arcs: ``cells`` and ``prior`` hold them end to end, ``sizes`` and ``evidence`` one
-        entry per arc. New cells get slots arc by arc, in increasing cell order within an arc."""
-        unseen = self._slot_of[cells] < 0
-        new, first = np.unique(cells[unseen], return_index=True)
+        entry per arc. New cells get slots in increasing cell order (which slot a cell gets changes
+        no number: every sum over a slot runs over its arc cells in their order)."""
+        new = np.unique(cells[self._slot_of[cells] < 0])
         if new.size:
-            new = new[np.lexsort((new, np.repeat(np.arange(sizes.size), sizes)[unseen][first]))]
             if self.n_touched + new.size > self._touched.size:
                 self._touched = np.resize(self._touched, max(2 * self._touched.size, self.n_touched + new.size))
             self._slot_of[new] = np.arange(self.n_touched, self.n_touched + new.size)
             self._touched[self.n_touched : self.n_touched + new.size] = new
             self.n_touched += new.size
-        n, m = cells.size, sizes.size
+        n, m = cells.size, len(sizes)
         if self.n_cells + n > self.slots.size:
             size = max(2 * self.slots.size, self.n_cells + n)
             self.slots = np.resize(self.slots, size)
@@ -123,7 +134,8 @@ class _ArcStore:
         self.slots[self.n_cells : self.n_cells + n] = self._slot_of[cells]
         self.prior[self.n_cells : self.n_cells + n] = prior
         self.evidence[self.n_cells : self.n_cells + n] = np.repeat(evidence, sizes)
-        self.starts[self.n_arcs : self.n_arcs + m] = self.n_cells + np.cumsum(sizes) - sizes
+        offsets = itertools.accumulate(sizes[:-1], initial=self.n_cells)
+        self.starts[self.n_arcs : self.n_arcs + m] = list(offsets)
         self.sizes[self.n_arcs : self.n_arcs + m] = sizes
         self.n_cells += n
         self.n_arcs += m
@@ -226,15 +238,19 @@ class LogOddsMapper:
         limit = np.repeat(np.asarray(free_to), sizes)
         free = (cells.dist_m < limit) & (cells.inset_m >= p.free_inset_cells * res)
         self._clear_occluded(found, L, limit, free)
-        if np.any(free):
-            d = cells.dist_m[free]
-            fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
-            w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
-            echo_weight = np.repeat([1.0 if beam.echo else p.no_echo_weight for beam in beams], sizes)
+        cleared = np.flatnonzero(free)
+        if cleared.size:
+            d = cells.dist_m[cleared]
+            # np.clip's arithmetic (max, then min) without its overhead.
+            fall = np.minimum(np.maximum((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0), 1.0)
+            w = (1.0 - (1.0 - p.free_edge_weight) * ang[cleared]) * fall
+            weight = p.l_free * w
+            if not all(beam.echo for beam in beams):  # (when all echo, every factor would be 1)
+                weight = weight * np.repeat([1.0 if b.echo else p.no_echo_weight for b in beams], sizes)[cleared]
             # ufunc.at on flat indices (its fast path) adds repeats in order, as on (row, col) pairs.
             flat_f = F.reshape(-1)
-            index = cells.rows[free] * self.fine.cols + cells.cols[free]
-            np.add.at(flat_f, index, (p.l_free * w * echo_weight[free]).astype(np.float32))
+            index = cells.rows[cleared] * self.fine.cols + cells.cols[cleared]
+            np.add.at(flat_f, index, weight.astype(np.float32))
             flat_f[index] = np.maximum(flat_f[index], p.free_clamp)
         # The surface is at r; the occupied cell is the one just behind it: each mapped echo's arc
         # is its cone's cells at that distance, plus the cell on its axis.
@@ -248,29 +264,37 @@ class LogOddsMapper:
         )
         arc_index = cells.rows[on_arc] * f.cols + cells.cols[on_arc]
         arc_prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[on_arc]
-        bounds = np.searchsorted(on_arc, found.starts)
-        parts_index, parts_prior, arc_sizes, strength = [], [], [], []
+        bounds = np.searchsorted(on_arc, found.starts).tolist()
+        # Beams without a mapped echo have no arc cells, so the arcs lie end to end in arc_index;
+        # each gets its axis cell after its own cells.
+        cone_starts = found.starts.tolist()
+        axis_at, axis_cells, arc_sizes, strength = [], [], [], []
         for i, beam in enumerate(beams):
-            if not mapped[i] or sizes[i] == 0:
-                continue
+            if not mapped[i] or cone_starts[i] == cone_starts[i + 1]:
+                continue  # no echo to map, or no cone cells at all
             r = beam.range_m
-            index, prior = arc_index[bounds[i] : bounds[i + 1]], arc_prior[bounds[i] : bounds[i + 1]]
+            size = bounds[i + 1] - bounds[i]
             ar, ac = f.point_index(
                 beam.x + (r + depth) * math.cos(beam.axis_rad), beam.y + (r + depth) * math.sin(beam.axis_rad)
             )
             if 0 <= ar < f.rows and 0 <= ac < f.cols:
-                index = np.append(index, ar * f.cols + ac)
-                prior = np.append(prior, 1.0)
-            if index.size:
+                axis_at.append(bounds[i + 1])
+                axis_cells.append(ar * f.cols + ac)
+                size += 1
+            if size:
                 near = min(max((p.max_echo_range_m - r) / span, 0.0), 1.0)
-                parts_index.append(index)
-                parts_prior.append(prior)
-                arc_sizes.append(index.size)
+                arc_sizes.append(size)
                 strength.append(p.l_occ * (p.occ_far_weight + (1.0 - p.occ_far_weight) * near))
-        if parts_index:
-            self._arcs.add(
-                np.concatenate(parts_index), np.concatenate(parts_prior), np.array(arc_sizes, dtype=np.int64), strength
-            )
+        if arc_sizes:
+            if axis_at:  # np.insert's result, without its overhead
+                at = np.array(axis_at) + np.arange(len(axis_at))  # where the axis cells land
+                arc = np.ones(arc_index.size + len(axis_at), dtype=bool)
+                arc[at] = False
+                index, prior = np.empty(arc.size, dtype=np.int64), np.empty(arc.size)
+                index[arc], index[at] = arc_index, axis_cells
+                prior[arc], prior[at] = arc_prior, 1.0
+                arc_index, arc_prior = index, prior
+            self._arcs.add(arc_index, arc_prior, arc_sizes, strength)
         self._sweeps_since_full += 1
         self._update_support(full=False)
 
@@ -343,7 +367,7 @@ class LogOddsMapper:
             self._occ_base = None
         elif arcs.n_arcs > self._support_arcs:
             # Only the slots of the new arcs: a few hundred cells, against thousands ever touched.
-            space = np.unique(arcs.slots[arcs.starts[self._support_arcs] : arcs.n_cells], return_inverse=True)
+            space = arcs.subset(self._support_arcs)
             self._recent = (space[0], self._attribute(self._support_arcs, self._support, p.explain_rounds, space))
         self._changed()
 
@@ -399,24 +423,30 @@ class LogOddsMapper:
         about the space behind it.
         """
         cells = found.cells
-        occ = (L[cells.rows, cells.cols] >= self.params.occ_threshold) & (cells.dist_m < limit)
-        if not np.any(occ):
+        believed = L[cells.rows, cells.cols]
+        hits = np.flatnonzero((believed >= self.params.occ_threshold) & (cells.dist_m < limit))
+        if not hits.size:
             return
-        for i in np.unique(np.searchsorted(found.starts, np.flatnonzero(occ), side="right") - 1):
-            own = found.of(int(i))
-            dist, off = cells.dist_m[own], cells.off_axis_rad[own]
-            hit = occ[own]
+        starts = found.starts.tolist()
+        first_hit = np.searchsorted(hits, found.starts).tolist()  # each beam's hits: first_hit[i]:first_hit[i + 1]
+        res = self.fine.resolution
+        for i in range(len(starts) - 1):
+            if first_hit[i] == first_hit[i + 1]:
+                continue
+            lo, hi = starts[i], starts[i + 1]
+            dist, off = cells.dist_m[lo:hi], cells.off_axis_rad[lo:hi]
+            hit = hits[first_hit[i] : first_hit[i + 1]] - lo
             occ_d, occ_a = dist[hit], off[hit]
-            half_width = np.arctan2(0.75 * self.fine.resolution, occ_d)  # angular half-size of a cell
+            half_width = np.arctan2(0.75 * res, occ_d)  # angular half-size of a cell
             behind = (dist[:, None] >= occ_d[None, :] - 1e-9) & (
                 np.abs(off[:, None] - occ_a[None, :]) <= half_width[None, :]
             )
             # A cell believed occupied does not hide itself from a beam that runs on past it near the
             # beam's axis: that is how a wrongly placed echo gets cleared again.
             central = np.abs(occ_a) <= self.params.recheck_within * self._half
-            central &= L[cells.rows[own][hit], cells.cols[own][hit]] < self.params.recheck_below
-            behind[np.flatnonzero(hit)[central], np.flatnonzero(central)] = False
-            free[own] &= ~np.any(behind, axis=1)
+            central &= believed[lo:hi][hit] < self.params.recheck_below
+            behind[hit[central], np.flatnonzero(central)] = False
+            free[lo:hi] &= ~np.any(behind, axis=1)
 
     def _disk(self, x: float, y: float, radius: float) -> tuple[slice, slice, NDArray[np.bool_]]:
         """The evidence cells whose centres lie within ``radius`` of (x, y): a box of them and a mask."""
