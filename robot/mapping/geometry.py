@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -14,9 +15,9 @@ from robot.grid import GridSpec
 from robot.world import Pose
 
 
-@dataclass(frozen=True)
-class Beam:
-    """One sonar reading placed in the map frame."""
+class Beam(NamedTuple):
+    """One sonar reading placed in the map frame (a named tuple: every sweep places its beams twice,
+    for the box fixes and the mapper, and a tuple is several times cheaper to make than a dataclass)."""
 
     x: float  # transducer position [m]
     y: float
@@ -41,8 +42,7 @@ def place_beams(pose: Pose, ranges_m: NDArray[np.float64], robot: RobotConfig) -
     c, s = math.cos(pose.theta), math.sin(pose.theta)
     max_r = robot.sonar.max_range_m
     beams = []
-    for mount, r in zip(robot.sonars, ranges_m, strict=True):
-        r = float(r)
+    for mount, r in zip(robot.sonars, np.asarray(ranges_m, dtype=np.float64).tolist(), strict=True):
         if not math.isfinite(r):
             r = max_r
         beams.append(
