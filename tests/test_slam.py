@@ -235,6 +235,8 @@ def test_map_cells_count_their_evidence_cells_like_the_block_means(resolution: f
     assert np.array_equal(mapper.states(), expected)
     occupied = (blocks == OCCUPIED).any(axis=(1, 3)) | mapper._outside
     assert np.array_equal(mapper.free_fraction(), np.where(occupied, -1.0, (blocks == FREE).mean(axis=(1, 3))))
+    # One mask alone is counted as a stack of one.
+    assert np.array_equal(mapper._block_counts(fine == FREE), (blocks == FREE).sum(axis=(1, 3)))
 
 
 def test_classify_reads_the_belief_like_the_ground_truth() -> None:

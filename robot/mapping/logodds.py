@@ -495,8 +495,11 @@ class LogOddsMapper:
 
     def _block_counts(self, masks: NDArray[np.bool_]) -> NDArray[np.uint8] | NDArray[np.int32]:
         """Per map cell, how many of its k x k evidence cells each of ``masks`` (m, rows * k, cols * k)
-        holds, (m, rows, cols): the k rows of each block added, then its k columns (slices added in
-        bytes, while a block's count fits in one; cheaper than numpy's sum, which casts)."""
+        holds, (m, rows, cols), or one mask's (rows, cols): the k rows of each block added, then its k
+        columns (slices added in bytes, while a block's count fits in one; cheaper than numpy's sum,
+        which casts)."""
+        if masks.ndim == 2:
+            return self._block_counts(masks[None])[0]
         grid = self.frame.grid
         k = self.k
         cells = masks.view(np.uint8) if k * k <= 255 else masks.astype(np.int32)
