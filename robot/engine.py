@@ -27,6 +27,8 @@ from robot.sensorlog import SensorLogWriter
 from robot.slam_config import SlamConfig
 from robot.truth import dilate8, reachable_cells, truth_states
 
+_NO_CELLS = (np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # no change to the exported map
+
 
 @dataclass
 class StepResult:
@@ -170,7 +172,7 @@ class SlamEngine:
     def _refresh(self, step_action: str, target_xy: tuple[float, float] | None, ok: bool) -> StepResult:
         belief = self.mapper.states()
         exported = self._exported  # the export of an unchanged belief (most steps change nothing)
-        if not np.array_equal(belief, self._belief):
+        if belief.tobytes() != self._belief.tobytes():  # np.array_equal for one shape and dtype, cheaper
             # The time limit runs from the last change of what the robot knows, not of the exported
             # map: in a large hall the area explored beyond a strip not yet seen free to the end is
             # grey in the export (not reachable from the start) while the robot maps it.
@@ -179,7 +181,7 @@ class SlamEngine:
         self._belief = belief
         self._free_fraction = self.mapper.free_fraction()
         self._passable = self._free_fraction >= self.explorer.min_free_fraction
-        changed = np.nonzero(exported != self._exported)
+        changed = np.nonzero(exported != self._exported) if exported is not self._exported else _NO_CELLS
         self._exported = exported
         frontier = int(self.explorer.frontier(self._belief, self._passable).sum())
         return StepResult(
@@ -208,7 +210,7 @@ class SlamEngine:
         self.mapper.finalize()
         self._belief = self.mapper.states()
         exported = classify(self._belief, self.frame.start_cell)
-        changed = np.nonzero(exported != self._exported)
+        changed = np.nonzero(exported != self._exported) if exported is not self._exported else _NO_CELLS
         self._exported = exported
         return changed[0].astype(np.int64), changed[1].astype(np.int64), exported[changed]
 

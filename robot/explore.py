@@ -131,7 +131,8 @@ class Explorer:
         ``open_cells``: the engine asks after every step, and most steps open nothing new."""
         key = (open_cells, self._start_map_cell())
         cached = self._around_reach_cache
-        if cached is None or cached[0][1] != key[1] or not np.array_equal(cached[0][0], open_cells):
+        # (Comparing bytes is np.array_equal for one shape and dtype, without its overhead.)
+        if cached is None or cached[0][1] != key[1] or cached[0][0].tobytes() != open_cells.tobytes():
             cached = (key, dilate8(reachable_cells(~open_cells, *key[1])))
             self._around_reach_cache = cached
         return cached[1]

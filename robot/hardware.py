@@ -6,8 +6,9 @@ IMU samples and a clock. Nothing here exposes a world or a true pose.
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, overload, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +45,40 @@ class ImuSample(NamedTuple):
     accel_y_m_s2: float = 0.0
 
 
+class ImuBatch(Sequence[ImuSample]):
+    """IMU samples kept as the arrays they were made in (the simulator makes a control tick's
+    samples at once): a sequence of ``ImuSample`` whose gyro rates also come as one array, so that
+    dead reckoning does not build them one sample at a time and take them apart again."""
+
+    def __init__(self, t_s: NDArray[np.float64], gyro_z_rad_s: NDArray[np.float64]) -> None:
+        self.t_s = t_s  # [s]
+        self.gyro_z_rad_s = gyro_z_rad_s  # [rad/s]
+
+    def __len__(self) -> int:
+        return len(self.gyro_z_rad_s)
+
+    @overload
+    def __getitem__(self, i: int) -> ImuSample: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> ImuBatch: ...
+
+    def __getitem__(self, i: int | slice) -> ImuSample | ImuBatch:
+        if isinstance(i, slice):
+            return ImuBatch(self.t_s[i], self.gyro_z_rad_s[i])
+        return ImuSample(float(self.t_s[i]), float(self.gyro_z_rad_s[i]))
+
+    def __iter__(self) -> Iterator[ImuSample]:
+        return map(ImuSample, self.t_s.tolist(), self.gyro_z_rad_s.tolist())
+
+
+def gyro_rates(samples: Sequence[ImuSample]) -> NDArray[np.float64]:
+    """The samples' yaw rates as an array [rad/s]."""
+    if isinstance(samples, ImuBatch):
+        return samples.gyro_z_rad_s
+    return np.array([s.gyro_z_rad_s for s in samples], dtype=np.float64)
+
+
 @runtime_checkable
 class Hardware(Protocol):
     """A robot the SLAM loop can drive. The clock belongs to the hardware, so a simulator can run
@@ -63,7 +98,7 @@ class Hardware(Protocol):
 
     def read_encoders(self) -> EncoderCounts: ...
 
-    def read_imu(self) -> list[ImuSample]:
+    def read_imu(self) -> Sequence[ImuSample]:
         """Every IMU sample taken since the previous call, oldest first."""
         ...
 

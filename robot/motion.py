@@ -8,7 +8,7 @@ heading for turns).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -46,7 +46,7 @@ TickHook = Callable[[PoseEstimate], None]
 
 
 class DeadReckoningRecorder(Protocol):
-    def dead_reckoning(self, counts: EncoderCounts, imu: list[ImuSample], driving: bool) -> None: ...
+    def dead_reckoning(self, counts: EncoderCounts, imu: Sequence[ImuSample], driving: bool) -> None: ...
 
     def origin(self, counts: EncoderCounts) -> None: ...
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -47,7 +47,7 @@ class SensorLogWriter:
         if self._fh is not None:
             self._fh.write(line)
 
-    def dead_reckoning(self, counts: EncoderCounts, imu: list[ImuSample], driving: bool) -> None:
+    def dead_reckoning(self, counts: EncoderCounts, imu: Sequence[ImuSample], driving: bool) -> None:
         # Full precision (repr) so that a replay reproduces the run bit for bit.
         for s in imu:
             self._write(f"I {s.t_s!r} {s.gyro_z_rad_s!r}\n")

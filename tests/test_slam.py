@@ -13,7 +13,7 @@ from robot.engine import SlamEngine, classify
 from robot.errors import ConfigError
 from robot.explore import CLOCKWISE, Explorer, direction_index
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
-from robot.hardware import EncoderCounts, ImuSample
+from robot.hardware import EncoderCounts, ImuBatch, ImuSample
 from robot.localization import DeadReckoning
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame
@@ -95,6 +95,24 @@ def test_driving_straight_integrates_encoder_distance_along_the_heading() -> Non
     est = dr.estimate
     assert est.x == pytest.approx(1.0, abs=1e-6)
     assert est.y == pytest.approx(2.0 + 50 * ROBOT.metres_per_count, abs=1e-6)
+
+
+def test_samples_in_arrays_give_the_same_estimate_as_samples_one_by_one() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(1, 201) * 0.01
+    gyro = 0.3 + 0.002 * rng.standard_normal(200)
+    batch = ImuBatch(t, gyro)
+    assert list(batch) == [ImuSample(float(a), float(b)) for a, b in zip(t, gyro, strict=True)]
+    assert batch[3] == ImuSample(float(t[3]), float(gyro[3])) and len(batch[10:30]) == 20
+    one_by_one, in_arrays = (DeadReckoning(ROBOT, Pose(0.0, 0.0, 0.0)) for _ in range(2))
+    for dr in (one_by_one, in_arrays):
+        dr.reset_origin(EncoderCounts(0.0, 0, 0))
+    for k in range(10):
+        tick = slice(20 * k, 20 * (k + 1))
+        counts = EncoderCounts(float(t[tick][-1]), -3 * (k + 1), 3 * (k + 1))
+        a = one_by_one.update(counts, list(batch[tick]), wheels_commanded=True)
+        b = in_arrays.update(counts, batch[tick], wheels_commanded=True)
+        assert a == b  # bit for bit
 
 
 # -- mappers -----------------------------------------------------------------------------------
@@ -194,6 +212,31 @@ def test_the_log_odds_map_does_not_depend_on_when_it_is_read() -> None:
         if i % 3 == 0:
             b.states()  # an extra look at b only
     assert np.array_equal(a.states(), b.states())
+
+
+@pytest.mark.parametrize("resolution", [0.05, 0.1, 0.2, 1.0])
+def test_map_cells_count_their_evidence_cells_like_the_block_means(resolution: float) -> None:
+    # One evidence cell per map cell (0.05 m) up to 400 (1.0 m, more than a byte holds).
+    grid = GridSpec(0.0, 0.0, resolution, round(2.0 / resolution), round(2.0 / resolution))
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 1.9, 2.0))
+    mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(resolution=resolution))
+    assert isinstance(mapper, LogOddsMapper)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        mapper.integrate(Pose(*rng.uniform(0.5, 1.5, 2), rng.uniform(-3, 3)), rng.uniform(0.1, 2.0, 8))
+    fine, k = mapper.fine_states(), mapper.k
+    blocks = fine.reshape(grid.rows, k, grid.cols, k)
+    outside = mapper._fine_outside.reshape(grid.rows, k, grid.cols, k)
+    some_occupied = ((blocks == OCCUPIED) & ~outside).any(axis=(1, 3))
+    free_share = ((blocks == FREE) | outside).mean(axis=(1, 3))
+    expected = np.full(grid.shape, UNKNOWN, dtype=np.int8)
+    expected[(free_share >= 0.9) & ~mapper._outside] = FREE
+    expected[some_occupied | mapper._outside] = OCCUPIED
+    assert np.array_equal(mapper.states(), expected)
+    occupied = (blocks == OCCUPIED).any(axis=(1, 3)) | mapper._outside
+    assert np.array_equal(mapper.free_fraction(), np.where(occupied, -1.0, (blocks == FREE).mean(axis=(1, 3))))
+    # One mask alone is counted as a stack of one.
+    assert np.array_equal(mapper._block_counts(fine == FREE), (blocks == FREE).sum(axis=(1, 3)))
 
 
 def test_classify_reads_the_belief_like_the_ground_truth() -> None:

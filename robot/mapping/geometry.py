@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -13,9 +15,9 @@ from robot.grid import GridSpec
 from robot.world import Pose
 
 
-@dataclass(frozen=True)
-class Beam:
-    """One sonar reading placed in the map frame."""
+class Beam(NamedTuple):
+    """One sonar reading placed in the map frame (a named tuple: every sweep places its beams twice,
+    for the box fixes and the mapper, and a tuple is several times cheaper to make than a dataclass)."""
 
     x: float  # transducer position [m]
     y: float
@@ -40,8 +42,7 @@ def place_beams(pose: Pose, ranges_m: NDArray[np.float64], robot: RobotConfig) -
     c, s = math.cos(pose.theta), math.sin(pose.theta)
     max_r = robot.sonar.max_range_m
     beams = []
-    for mount, r in zip(robot.sonars, ranges_m, strict=True):
-        r = float(r)
+    for mount, r in zip(robot.sonars, np.asarray(ranges_m, dtype=np.float64).tolist(), strict=True):
         if not math.isfinite(r):
             r = max_r
         beams.append(
@@ -68,28 +69,30 @@ class Cones:
 
 
 def _bounds(
-    grid: GridSpec, beam: Beam, half_angle_rad: float, reach: float, half_ap: float
+    grid: GridSpec, beam: Beam, half_angle_rad: float, reach: float, half_ap: float, c: float, s: float
 ) -> tuple[int, int, int, int]:
-    """Column and bottom-up row span of the cells that can hold ``beam``'s cone (empty if c1 < c0)."""
-    c, s = math.cos(beam.axis_rad), math.sin(beam.axis_rad)
-    px, py = -s * half_ap, c * half_ap
-    xs = [beam.x + px, beam.x - px]
-    ys = [beam.y + py, beam.y - py]
-    for a in (beam.axis_rad - half_angle_rad, beam.axis_rad, beam.axis_rad + half_angle_rad):
-        ex, ey = beam.x + reach * math.cos(a), beam.y + reach * math.sin(a)
-        xs += [ex + px, ex - px]
-        ys += [ey + py, ey - py]
+    """Column and bottom-up row span of the cells that can hold ``beam``'s cone (empty if c1 < c0).
+
+    ``c`` and ``s`` are the cosine and sine of the beam's axis. The cone lies within half the
+    aperture of the transducer, its three edge points and the sector's extremes along x and y."""
+    axis = beam.axis_rad
+    xs = [beam.x, beam.x + reach * math.cos(axis - half_angle_rad), beam.x + reach * c]
+    ys = [beam.y, beam.y + reach * math.sin(axis - half_angle_rad), beam.y + reach * s]
+    xs.append(beam.x + reach * math.cos(axis + half_angle_rad))
+    ys.append(beam.y + reach * math.sin(axis + half_angle_rad))
     for k in range(-2, 3):  # the sector's extremes along x and y, where they lie inside it
         q = k * (math.pi / 2)
-        if abs(math.remainder(q - beam.axis_rad, 2 * math.pi)) <= half_angle_rad:
-            ex, ey = beam.x + reach * math.cos(q), beam.y + reach * math.sin(q)
-            xs += [ex + abs(px), ex - abs(px)]
-            ys += [ey + abs(py), ey - abs(py)]
+        if abs(math.remainder(q - axis, 2 * math.pi)) <= half_angle_rad:
+            xs.append(beam.x + reach * math.cos(q))
+            ys.append(beam.y + reach * math.sin(q))
+    # Half the aperture either side of every point; rounding is monotonic, so the extreme point
+    # moved by it is the extreme of the moved points.
+    ax, ay = abs(s * half_ap), abs(c * half_ap)
     res = grid.resolution
-    c0 = max(math.floor((min(xs) - grid.origin_x) / res), 0)
-    c1 = min(math.floor((max(xs) - grid.origin_x) / res), grid.cols - 1)
-    iy0 = max(math.floor((min(ys) - grid.origin_y) / res), 0)
-    iy1 = min(math.floor((max(ys) - grid.origin_y) / res), grid.rows - 1)
+    c0 = max(math.floor((min(xs) - ax - grid.origin_x) / res), 0)
+    c1 = min(math.floor((max(xs) + ax - grid.origin_x) / res), grid.cols - 1)
+    iy0 = max(math.floor((min(ys) - ay - grid.origin_y) / res), 0)
+    iy1 = min(math.floor((max(ys) + ay - grid.origin_y) / res), grid.rows - 1)
     return c0, c1, iy0, iy1
 
 
@@ -106,23 +109,28 @@ def cones(
     res = grid.resolution
     half_ap = aperture_m / 2.0
     n = len(beams)
-    spans = np.zeros((n, 4), dtype=np.int64)  # c0, width, iy0, height
-    params = np.zeros((n, 5))  # x, y, cos, sin, reach
-    for i, (beam, reach) in enumerate(zip(beams, reaches_m, strict=True)):
+    span_rows: list[tuple[int, int, int, int]] = []  # c0, width, iy0, height
+    param_rows: list[tuple[float, float, float, float, float]] = []  # x, y, cos, sin, reach
+    for beam, reach in zip(beams, reaches_m, strict=True):
         reach = max(reach, 0.0)
+        cos_a, sin_a = math.cos(beam.axis_rad), math.sin(beam.axis_rad)
+        span = (0, 0, 0, 0)
         if reach > 0.0:
-            c0, c1, iy0, iy1 = _bounds(grid, beam, half_angle_rad, reach, half_ap)
+            c0, c1, iy0, iy1 = _bounds(grid, beam, half_angle_rad, reach, half_ap, cos_a, sin_a)
             if c1 >= c0 and iy1 >= iy0:
-                spans[i] = (c0, c1 - c0 + 1, iy0, iy1 - iy0 + 1)
-        params[i] = (beam.x, beam.y, math.cos(beam.axis_rad), math.sin(beam.axis_rad), reach)
+                span = (c0, c1 - c0 + 1, iy0, iy1 - iy0 + 1)
+        span_rows.append(span)
+        param_rows.append((beam.x, beam.y, cos_a, sin_a, reach))
+    spans = np.array(span_rows, dtype=np.int64).reshape(n, 4)
+    params = np.array(param_rows, dtype=np.float64).reshape(n, 5)
     sizes = spans[:, 1] * spans[:, 3]
-    box_starts = np.concatenate(([0], np.cumsum(sizes)))
-    owner = np.repeat(np.arange(n), sizes)
+    box_starts = np.array([0, *itertools.accumulate(sizes.tolist())], dtype=np.int64)
     local = np.arange(int(box_starts[-1]), dtype=np.float64) - np.repeat(box_starts[:-1].astype(np.float64), sizes)
     width = np.repeat(spans[:, 1].astype(np.float64), sizes)
     row = np.floor((local + 0.5) / width)  # exact: small whole numbers
+    col = local - row * width
     # Cell centres relative to each transducer.
-    dx = np.repeat(grid.origin_x + (spans[:, 0] + 0.5) * res - params[:, 0], sizes) + (local - row * width) * res
+    dx = np.repeat(grid.origin_x + (spans[:, 0] + 0.5) * res - params[:, 0], sizes) + col * res
     dy = np.repeat(grid.origin_y + (spans[:, 2] + 0.5) * res - params[:, 1], sizes) + row * res
     c = np.repeat(params[:, 2], sizes)
     s = np.repeat(params[:, 3], sizes)
@@ -136,16 +144,18 @@ def cones(
     keep = dist <= reach_b[inside]  # the squared test above can round the other way at the very edge
     inside, dist = inside[keep], dist[keep]
     off = np.arctan2(spread[inside], along[inside]) * np.sign(lateral[inside])
-    ix = np.repeat(spans[:, 0], sizes)[inside] + (local[inside] - row[inside] * width[inside]).astype(np.int64)
-    iy = np.repeat(spans[:, 2], sizes)[inside] + row[inside].astype(np.int64)
+    # Each cell's place in its box, back to grid indices (each box holds its beam's cells).
+    starts = np.searchsorted(inside, box_starts)
+    inside_sizes = starts[1:] - starts[:-1]
+    ix = np.repeat(spans[:, 0], inside_sizes) + col[inside].astype(np.int64)
+    iy = np.repeat(spans[:, 2], inside_sizes) + row[inside].astype(np.int64)
     cells = ConeCells(
-        rows=(grid.rows - 1 - iy).astype(np.int64),
+        rows=grid.rows - 1 - iy,
         cols=ix,
         dist_m=dist,
         off_axis_rad=off,
         inset_m=inset[inside],
     )
-    starts = np.searchsorted(owner[inside], np.arange(n + 1)).astype(np.int64)
     return Cones(cells, starts)
 
 

@@ -18,6 +18,7 @@ occupied and white only if all of it is free, which keeps white cells safe.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -78,13 +79,15 @@ class LogOddsParams(BaseModel):
 
 class _ArcStore:
     """Every echo's arc, flattened into growing arrays: per arc cell its slot (a compact number for
-    each fine cell any arc has touched) and prior; per echo its start offset and strength."""
+    each fine cell any arc has touched), prior and the echo's evidence; per echo its start offset and
+    size."""
 
     def __init__(self, n_cells: int) -> None:
         self.slots = np.zeros(4096, dtype=np.int64)
         self.prior = np.zeros(4096)
+        self.evidence = np.zeros(4096)  # the echo's occupied evidence, on each of its cells
         self.starts = np.zeros(512, dtype=np.int64)
-        self.strength = np.zeros(512)
+        self.sizes = np.zeros(512, dtype=np.int64)
         self.n_cells = 0
         self.n_arcs = 0
         self._slot_of = np.full(n_cells, -1, dtype=np.int64)  # fine cell -> slot
@@ -96,33 +99,46 @@ class _ArcStore:
         """The fine cell of every slot."""
         return self._touched[: self.n_touched]
 
+    def subset(self, first_arc: int) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """The slots that arcs ``first_arc..`` touch, in increasing order, and each of their cells'
+        place among them (what np.unique with return_inverse gives, without a sort)."""
+        slots = self.slots[self.starts[first_arc] : self.n_cells]
+        seen = np.zeros(self.n_touched, dtype=bool)
+        seen[slots] = True
+        space = np.flatnonzero(seen)
+        place = np.empty(self.n_touched, dtype=np.int64)
+        place[space] = np.arange(space.size)
+        return space, place[slots]
+
     def add(
-        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: NDArray[np.int64], strength: list[float]
+        self, cells: NDArray[np.int64], prior: NDArray[np.float64], sizes: list[int], evidence: list[float]
     ) -> None:
-        """Append arcs: ``cells`` and ``prior`` hold them end to end, ``sizes`` and ``strength`` one
-        entry per arc. New cells get slots arc by arc, in increasing cell order within an arc."""
-        unseen = self._slot_of[cells] < 0
-        new, first = np.unique(cells[unseen], return_index=True)
+        """Append arcs: ``cells`` and ``prior`` hold them end to end, ``sizes`` and ``evidence`` one
+        entry per arc. New cells get slots in increasing cell order (which slot a cell gets changes
+        no number: every sum over a slot runs over its arc cells in their order)."""
+        new = np.unique(cells[self._slot_of[cells] < 0])
         if new.size:
-            new = new[np.lexsort((new, np.repeat(np.arange(sizes.size), sizes)[unseen][first]))]
             if self.n_touched + new.size > self._touched.size:
                 self._touched = np.resize(self._touched, max(2 * self._touched.size, self.n_touched + new.size))
             self._slot_of[new] = np.arange(self.n_touched, self.n_touched + new.size)
             self._touched[self.n_touched : self.n_touched + new.size] = new
             self.n_touched += new.size
-        n, m = cells.size, sizes.size
+        n, m = cells.size, len(sizes)
         if self.n_cells + n > self.slots.size:
             size = max(2 * self.slots.size, self.n_cells + n)
             self.slots = np.resize(self.slots, size)
             self.prior = np.resize(self.prior, size)
+            self.evidence = np.resize(self.evidence, size)
         if self.n_arcs + m > self.starts.size:
             size = max(2 * self.starts.size, self.n_arcs + m)
             self.starts = np.resize(self.starts, size)
-            self.strength = np.resize(self.strength, size)
+            self.sizes = np.resize(self.sizes, size)
         self.slots[self.n_cells : self.n_cells + n] = self._slot_of[cells]
         self.prior[self.n_cells : self.n_cells + n] = prior
-        self.starts[self.n_arcs : self.n_arcs + m] = self.n_cells + np.cumsum(sizes) - sizes
-        self.strength[self.n_arcs : self.n_arcs + m] = strength
+        self.evidence[self.n_cells : self.n_cells + n] = np.repeat(evidence, sizes)
+        offsets = itertools.accumulate(sizes[:-1], initial=self.n_cells)
+        self.starts[self.n_arcs : self.n_arcs + m] = list(offsets)
+        self.sizes[self.n_arcs : self.n_arcs + m] = sizes
         self.n_cells += n
         self.n_arcs += m
 
@@ -154,12 +170,14 @@ class LogOddsMapper:
         self._arcs = _ArcStore(self.fine.rows * self.fine.cols)
         self._support: NDArray[np.float64] | None = None  # per slot, from the last full re-sharing
         self._support_arcs = 0  # arcs covered by it
-        self._recent: NDArray[np.float64] | None = None  # per slot, the echoes since
+        # The echoes since, shared: the slots they touch (sorted) and the evidence on each.
+        self._recent: tuple[NDArray[np.int64], NDArray[np.float64]] | None = None
         self._occ_base: NDArray[np.float32] | None = None  # bumps plus the last full sharing
         self._sweeps_since_full = 0
         self._occ_cache: NDArray[np.float32] | None = None
         self._logodds_cache: NDArray[np.float32] | None = None
         self._fine_cache: NDArray[np.int8] | None = None
+        self._counts_cache: NDArray[np.uint8] | NDArray[np.int32] | None = None
         self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
         self._tangents = TangentLines(self._half, p.tangents) if p.tangents.enabled else None
         self._cut = np.zeros(grid.shape, dtype=bool)  # map cells a straight wall cuts through
@@ -181,6 +199,9 @@ class LogOddsMapper:
         else:
             self._fine_outside = np.zeros((grid.rows * self.k, grid.cols * self.k), dtype=bool)
             self._near_extent = self._fine_outside
+        # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
+        # there come from the wall, and the floor up to it is free.
+        self._wall_face = self._near_extent & ~self._fine_outside
 
     def _fine_outside_extent(self, extent: tuple[float, float, float, float], margin_m: float) -> NDArray[np.bool_]:
         """Fine cells of the map's area whose centre lies outside the room box shrunk by ``margin_m``."""
@@ -222,15 +243,19 @@ class LogOddsMapper:
         limit = np.repeat(np.asarray(free_to), sizes)
         free = (cells.dist_m < limit) & (cells.inset_m >= p.free_inset_cells * res)
         self._clear_occluded(found, L, limit, free)
-        if np.any(free):
-            d = cells.dist_m[free]
-            fall = np.clip((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0, 1.0)
-            w = (1.0 - (1.0 - p.free_edge_weight) * ang[free]) * fall
-            echo_weight = np.repeat([1.0 if beam.echo else p.no_echo_weight for beam in beams], sizes)
+        cleared = np.flatnonzero(free)
+        if cleared.size:
+            d = cells.dist_m[cleared]
+            # np.clip's arithmetic (max, then min) without its overhead.
+            fall = np.minimum(np.maximum((p.carve_max_m - d) / max(p.carve_max_m - p.carve_full_m, 1e-9), 0.0), 1.0)
+            w = (1.0 - (1.0 - p.free_edge_weight) * ang[cleared]) * fall
+            weight = p.l_free * w
+            if not all(beam.echo for beam in beams):  # (when all echo, every factor would be 1)
+                weight = weight * np.repeat([1.0 if b.echo else p.no_echo_weight for b in beams], sizes)[cleared]
             # ufunc.at on flat indices (its fast path) adds repeats in order, as on (row, col) pairs.
             flat_f = F.reshape(-1)
-            index = cells.rows[free] * self.fine.cols + cells.cols[free]
-            np.add.at(flat_f, index, (p.l_free * w * echo_weight[free]).astype(np.float32))
+            index = cells.rows[cleared] * self.fine.cols + cells.cols[cleared]
+            np.add.at(flat_f, index, weight.astype(np.float32))
             flat_f[index] = np.maximum(flat_f[index], p.free_clamp)
         # The surface is at r; the occupied cell is the one just behind it: each mapped echo's arc
         # is its cone's cells at that distance, plus the cell on its axis.
@@ -244,65 +269,92 @@ class LogOddsMapper:
         )
         arc_index = cells.rows[on_arc] * f.cols + cells.cols[on_arc]
         arc_prior = 1.0 - (1.0 - p.arc_edge_weight) * ang[on_arc]
-        bounds = np.searchsorted(on_arc, found.starts)
-        parts_index, parts_prior, arc_sizes, strength = [], [], [], []
+        bounds = np.searchsorted(on_arc, found.starts).tolist()
+        # Beams without a mapped echo have no arc cells, so the arcs lie end to end in arc_index;
+        # each gets its axis cell after its own cells.
+        cone_starts = found.starts.tolist()
+        axis_at, axis_cells, arc_sizes, strength = [], [], [], []
         for i, beam in enumerate(beams):
-            if not mapped[i] or sizes[i] == 0:
-                continue
+            if not mapped[i] or cone_starts[i] == cone_starts[i + 1]:
+                continue  # no echo to map, or no cone cells at all
             r = beam.range_m
-            index, prior = arc_index[bounds[i] : bounds[i + 1]], arc_prior[bounds[i] : bounds[i + 1]]
+            size = bounds[i + 1] - bounds[i]
             ar, ac = f.point_index(
                 beam.x + (r + depth) * math.cos(beam.axis_rad), beam.y + (r + depth) * math.sin(beam.axis_rad)
             )
             if 0 <= ar < f.rows and 0 <= ac < f.cols:
-                index = np.append(index, ar * f.cols + ac)
-                prior = np.append(prior, 1.0)
-            if index.size:
+                axis_at.append(bounds[i + 1])
+                axis_cells.append(ar * f.cols + ac)
+                size += 1
+            if size:
                 near = min(max((p.max_echo_range_m - r) / span, 0.0), 1.0)
-                parts_index.append(index)
-                parts_prior.append(prior)
-                arc_sizes.append(index.size)
-                strength.append(p.occ_far_weight + (1.0 - p.occ_far_weight) * near)
+                arc_sizes.append(size)
+                strength.append(p.l_occ * (p.occ_far_weight + (1.0 - p.occ_far_weight) * near))
         if self._tangents is not None:
             echoes = [b for b, m in zip(beams, mapped, strict=True) if m]
             self._tangents.add(
                 [b.x for b in echoes], [b.y for b in echoes], [b.axis_rad for b in echoes], [b.range_m for b in echoes]
             )
-        if parts_index:
-            self._arcs.add(
-                np.concatenate(parts_index), np.concatenate(parts_prior), np.array(arc_sizes, dtype=np.int64), strength
-            )
+        if arc_sizes:
+            if axis_at:  # np.insert's result, without its overhead
+                at = np.array(axis_at) + np.arange(len(axis_at))  # where the axis cells land
+                arc = np.ones(arc_index.size + len(axis_at), dtype=bool)
+                arc[at] = False
+                index, prior = np.empty(arc.size, dtype=np.int64), np.empty(arc.size)
+                index[arc], index[at] = arc_index, axis_cells
+                prior[arc], prior[at] = arc_prior, 1.0
+                arc_index, arc_prior = index, prior
+            self._arcs.add(arc_index, arc_prior, arc_sizes, strength)
         self._sweeps_since_full += 1
         self._update_support(full=False)
 
-    def _attribute(self, first_arc: int, support: NDArray[np.float64] | None, rounds: int) -> NDArray[np.float64]:
+    def _attribute(
+        self,
+        first_arc: int,
+        support: NDArray[np.float64] | None,
+        rounds: int,
+        subset: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+    ) -> NDArray[np.float64]:
         """Share the evidence of arcs ``first_arc..`` over their cells, on top of ``support`` (none: zero).
 
-        Works per slot (see ``_ArcStore``), so the cost follows the arcs, not the size of the map."""
+        Works per slot (see ``_ArcStore``), so the cost follows the arcs, not the size of the map:
+        over every slot when ``subset`` is None, else over the slots it lists (sorted, holding all of
+        the arcs' slots) with each arc cell's place among them. Returns the evidence per slot of
+        that subset."""
         arcs = self._arcs
         lo = int(arcs.starts[first_arc])
         hi = arcs.n_cells
         slots = arcs.slots[lo:hi]
-        n = arcs.n_touched
+        touched = arcs.touched
+        space = None
+        if subset is not None:  # slots numbered within the subset
+            space, slots = subset
+            touched = touched[space]
+        n = touched.size
         starts = arcs.starts[first_arc : arcs.n_arcs] - lo
-        sizes = np.diff(np.append(starts, hi - lo))
-        strength = self.params.l_occ * np.repeat(arcs.strength[first_arc : arcs.n_arcs], sizes)
-        free = self.free_evidence.reshape(-1)[arcs.touched]
-        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * free[slots])
+        sizes = arcs.sizes[first_arc : arcs.n_arcs]
+        strength = arcs.evidence[lo:hi]
+        free = self.free_evidence.reshape(-1)[touched]
+        # Every term that depends on the slot alone is computed once per slot, then gathered.
+        base = arcs.prior[lo:hi] * np.exp(self.params.free_discount * free)[slots]
         before = np.zeros(n)
         if support is not None:
-            before[: support.size] = support
+            if space is None:
+                before[: support.size] = support
+            else:
+                known = int(np.searchsorted(space, support.size))  # the slots the last full sharing saw
+                before[:known] = support[space[:known]]
         # An echo whose arc reaches the room's wall is most likely the wall: the cells beyond the box
         # count as supported, which explains away the arc's cells in the room.
-        before += self.params.boundary_support * self._beyond_box[arcs.touched]
+        before += self.params.boundary_support * self._beyond_box[touched]
         own: NDArray[np.float64] = np.zeros(n)
         gain, cap = self.params.explain_gain, self.params.explain_cap
-        for _ in range(rounds + 1):
-            w = base * np.exp(gain * np.minimum(before[slots] + own[slots], cap))
-            wmax = np.repeat(np.maximum.reduceat(w, starts), sizes)
-            own = np.bincount(slots, weights=strength * w / np.maximum(wmax, 1e-12), minlength=n).astype(
-                np.float64, copy=False
-            )
+        for k in range(rounds + 1):
+            # The first round has nothing of its own to add; a gain of 1 needs no multiplication.
+            e = np.minimum(before + own if k else before, cap)
+            w = base * np.exp(gain * e if gain != 1.0 else e)[slots]
+            wmax = np.repeat(np.maximum(np.maximum.reduceat(w, starts), 1e-12), sizes)
+            own = np.bincount(slots, weights=strength * w / wmax, minlength=n).astype(np.float64, copy=False)
         return own
 
     def _update_support(self, full: bool) -> None:
@@ -324,7 +376,9 @@ class LogOddsMapper:
             self._recent = None
             self._occ_base = None
         elif arcs.n_arcs > self._support_arcs:
-            self._recent = self._attribute(self._support_arcs, self._support, p.explain_rounds)
+            # Only the slots of the new arcs: a few hundred cells, against thousands ever touched.
+            space = arcs.subset(self._support_arcs)
+            self._recent = (space[0], self._attribute(self._support_arcs, self._support, p.explain_rounds, space))
         self._changed()
 
     def _changed(self, occupied: bool = True) -> None:
@@ -333,6 +387,7 @@ class LogOddsMapper:
             self._occ_cache = None
         self._logodds_cache = None
         self._fine_cache = None
+        self._counts_cache = None
 
     def occupied_evidence(self) -> NDArray[np.float32]:
         """Every echo's evidence, shared over its arc by the free evidence gathered so far.
@@ -349,8 +404,9 @@ class LogOddsMapper:
                     self._occ_base.reshape(-1)[cells] = contact[cells] + self._support.astype(np.float32)
             occ = self._occ_base.copy()
             if self._recent is not None and self._support is not None:  # the echoes since, on their cells
-                slots = np.flatnonzero(self._recent)
-                total = self._recent[slots]
+                space, recent = self._recent
+                nonzero = np.flatnonzero(recent)
+                slots, total = space[nonzero], recent[nonzero]
                 total[slots < self._support.size] += self._support[slots[slots < self._support.size]]
                 cells = self._arcs.touched[slots]
                 occ.reshape(-1)[cells] = contact[cells] + total.astype(np.float32)
@@ -377,24 +433,30 @@ class LogOddsMapper:
         about the space behind it.
         """
         cells = found.cells
-        occ = (L[cells.rows, cells.cols] >= self.params.occ_threshold) & (cells.dist_m < limit)
-        if not np.any(occ):
+        believed = L[cells.rows, cells.cols]
+        hits = np.flatnonzero((believed >= self.params.occ_threshold) & (cells.dist_m < limit))
+        if not hits.size:
             return
-        for i in np.unique(np.searchsorted(found.starts, np.flatnonzero(occ), side="right") - 1):
-            own = found.of(int(i))
-            dist, off = cells.dist_m[own], cells.off_axis_rad[own]
-            hit = occ[own]
+        starts = found.starts.tolist()
+        first_hit = np.searchsorted(hits, found.starts).tolist()  # each beam's hits: first_hit[i]:first_hit[i + 1]
+        res = self.fine.resolution
+        for i in range(len(starts) - 1):
+            if first_hit[i] == first_hit[i + 1]:
+                continue
+            lo, hi = starts[i], starts[i + 1]
+            dist, off = cells.dist_m[lo:hi], cells.off_axis_rad[lo:hi]
+            hit = hits[first_hit[i] : first_hit[i + 1]] - lo
             occ_d, occ_a = dist[hit], off[hit]
-            half_width = np.arctan2(0.75 * self.fine.resolution, occ_d)  # angular half-size of a cell
+            half_width = np.arctan2(0.75 * res, occ_d)  # angular half-size of a cell
             behind = (dist[:, None] >= occ_d[None, :] - 1e-9) & (
                 np.abs(off[:, None] - occ_a[None, :]) <= half_width[None, :]
             )
             # A cell believed occupied does not hide itself from a beam that runs on past it near the
             # beam's axis: that is how a wrongly placed echo gets cleared again.
             central = np.abs(occ_a) <= self.params.recheck_within * self._half
-            central &= L[cells.rows[own][hit], cells.cols[own][hit]] < self.params.recheck_below
-            behind[np.flatnonzero(hit)[central], np.flatnonzero(central)] = False
-            free[own] &= ~np.any(behind, axis=1)
+            central &= believed[lo:hi][hit] < self.params.recheck_below
+            behind[hit[central], np.flatnonzero(central)] = False
+            free[lo:hi] &= ~np.any(behind, axis=1)
 
     def _disk(self, x: float, y: float, radius: float) -> tuple[slice, slice, NDArray[np.bool_]]:
         """The evidence cells whose centres lie within ``radius`` of (x, y): a box of them and a mask."""
@@ -458,35 +520,64 @@ class LogOddsMapper:
         out = np.full(L.shape, UNKNOWN, dtype=np.int8)
         out[L >= p.occ_threshold] = OCCUPIED
         out[L <= p.free_threshold] = FREE
-        # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
-        # there come from the wall, and the floor up to it is free.
-        out[self._near_extent & ~self._fine_outside] = FREE
+        out[self._wall_face] = FREE
         self._fine_cache = out
         return out
 
-    def _block_counts(self, mask: NDArray[np.bool_]) -> NDArray[np.int8] | NDArray[np.int32]:
-        """Per map cell, how many of its k x k evidence cells ``mask`` holds (summed over the rows of a
-        block, then its columns: two contiguous reductions instead of one over two strided axes)."""
+    def _block_counts(self, masks: NDArray[np.bool_]) -> NDArray[np.uint8] | NDArray[np.int32]:
+        """Per map cell, how many of its k x k evidence cells each of ``masks`` (m, rows * k, cols * k)
+        holds, (m, rows, cols), or one mask's (rows, cols): the k rows of each block added, then its k
+        columns (slices added in bytes, while a block's count fits in one; cheaper than numpy's sum,
+        which casts)."""
+        if masks.ndim == 2:
+            return self._block_counts(masks[None])[0]
         grid = self.frame.grid
         k = self.k
+        cells = masks.view(np.uint8) if k * k <= 255 else masks.astype(np.int32)
         if k == 1:  # one evidence cell per map cell: the mask is the count
-            return mask.view(np.int8)
-        rows = mask.reshape(grid.rows, k, grid.cols * k).sum(axis=1, dtype=np.int32)
-        return rows.reshape(grid.rows, grid.cols, k).sum(axis=2, dtype=np.int32)
+            return cells
+        m = masks.shape[0]
+        by_row = cells.reshape(m, grid.rows, k, grid.cols * k)
+        rows = by_row[:, :, 0] + by_row[:, :, 1]
+        for i in range(2, k):
+            rows += by_row[:, :, i]
+        by_col = rows.reshape(m, grid.rows, grid.cols, k)
+        counts = by_col[..., 0] + by_col[..., 1]
+        for i in range(2, k):
+            counts += by_col[..., i]
+        return counts
+
+    def _cell_counts(self) -> NDArray[np.uint8] | NDArray[np.int32]:
+        """Per map cell, its evidence cells that are occupied, occupied inside the room box, free,
+        and free or outside the box (4, rows, cols): counted together, once per change. Occupied and
+        free are what ``fine_states`` calls them (the thresholds lie either side of zero)."""
+        if self._counts_cache is None:
+            p = self.params
+            L = self.logodds[self._inner]
+            masks = np.empty((4, *L.shape), dtype=bool)
+            occupied, occupied_inside, free, free_or_outside = masks
+            np.greater_equal(L, p.occ_threshold, out=occupied)
+            occupied &= ~self._wall_face
+            np.logical_and(occupied, ~self._fine_outside, out=occupied_inside)
+            np.less_equal(L, p.free_threshold, out=free)
+            free |= self._wall_face
+            np.logical_or(free, self._fine_outside, out=free_or_outside)
+            self._counts_cache = self._block_counts(masks)
+        return self._counts_cache
 
     def free_fraction(self) -> NDArray[np.float64]:
-        fine = self.fine_states()
-        occ = (self._block_counts(fine == OCCUPIED) > 0) | self._outside
+        counts = self._cell_counts()
+        occ = (counts[0] > 0) | self._outside
         # A count over k * k is exactly what the mean of the block's booleans gives.
-        return np.where(occ, -1.0, self._block_counts(fine == FREE) / (self.k * self.k))
+        return np.where(occ, -1.0, counts[2] / (self.k * self.k))
 
     def states(self) -> NDArray[np.int8]:
         grid = self.frame.grid
-        fine = self.fine_states()
-        occ = self._block_counts((fine == OCCUPIED) & ~self._fine_outside) > 0
+        counts = self._cell_counts()
+        occ = counts[1] > 0
         # White needs no occupied evidence and nearly all of the cell seen free: a strip along an
         # obstacle's face that no beam could clear without touching the face may stay unseen.
-        free_frac = self._block_counts((fine == FREE) | self._fine_outside) / (self.k * self.k)
+        free_frac = counts[3] / (self.k * self.k)
         free = free_frac >= self.params.white_min_free
         out = np.full(grid.shape, UNKNOWN, dtype=np.int8)
         out[free & ~self._outside] = FREE

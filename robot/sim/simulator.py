@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from robot.config import RobotConfig, SimNoise
 from robot.errors import WorldError
-from robot.hardware import EncoderCounts, ImuSample, SonarSweep
+from robot.hardware import EncoderCounts, ImuBatch, ImuSample, SonarSweep
 from robot.sim.sonar import Walls, cone_candidates, ray_blocked, simulate_ranges
 from robot.world import Pose, World
 
@@ -64,8 +64,8 @@ class SimRobot:
             robot.wheel_radius_m * (1.0 + noise.wheel_radius_error_right),
         )
         self._gyro_bias = noise.gyro_bias_rad_s
-        self._imu_t: list[NDArray[np.floating]] = []
-        self._imu_w: list[NDArray[np.floating]] = []
+        self._imu_t: list[NDArray[np.float64]] = []
+        self._imu_w: list[NDArray[np.float64]] = []
         self._closed = False
         self.collisions = 0  # ticks in which the body hit something
         self.odometer_m = 0.0  # true distance travelled [m]
@@ -103,7 +103,7 @@ class SimRobot:
             math.floor(self._wheel_angle_r / (2.0 * math.pi) * per_rev),
         )
 
-    def read_imu(self) -> list[ImuSample]:
+    def read_imu(self) -> ImuBatch | list[ImuSample]:
         if not self._imu_t:
             return []
         if len(self._imu_t) == 1:
@@ -112,7 +112,7 @@ class SimRobot:
             ts, ws = np.concatenate(self._imu_t), np.concatenate(self._imu_w)
         self._imu_t.clear()
         self._imu_w.clear()
-        return list(map(ImuSample, ts.tolist(), ws.tolist()))
+        return ImuBatch(ts, ws)
 
     def read_sonar_sweep(self) -> SonarSweep:
         n = len(self.robot.sonars)
@@ -162,8 +162,10 @@ class SimRobot:
 
     def _ping(self, idx: NDArray[np.int64]) -> NDArray[np.float64]:
         c, s = math.cos(self._theta), math.sin(self._theta)
-        mxy = self._mount_xy[idx]
-        origins = np.column_stack([self._x + c * mxy[:, 0] - s * mxy[:, 1], self._y + s * mxy[:, 0] + c * mxy[:, 1]])
+        mx, my = self._mount_xy[idx].T
+        origins = np.empty((idx.size, 2))
+        origins[:, 0] = self._x + c * mx - s * my
+        origins[:, 1] = self._y + s * mx + c * my
         bearings = self._theta + self._mount_bearing[idx]
         dist, inc, points = cone_candidates(self._walls, origins, bearings, self._half_beam)
         segs = self._segments
@@ -240,6 +242,6 @@ class SimRobot:
         # Gyro: true yaw rate + slowly wandering bias + white noise, one sample per tick.
         bias = self._gyro_bias + np.add.accumulate(noise.gyro_bias_walk_rad_s2 * math.sqrt(dt) * draws[:, 2])
         self._gyro_bias = float(bias[-1])
-        self._imu_t.append(self._t + dt * np.arange(1, ticks + 1))
+        self._imu_t.append(self._t + dt * np.arange(1, ticks + 1, dtype=np.float64))
         self._imu_w.append(rate + bias + noise.gyro_noise_std_rad_s * draws[:, 3])
         self._t += dt * ticks

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from robot.config import SimNoise, SonarModel
 
 _EPS = 1e-12
+_EDGE_SIGNS = np.array([-1.0, 1.0]).reshape(2, 1, 1)
 
 
 class Walls:
@@ -65,25 +66,26 @@ def cone_candidates(
     # Only edges whose free side faces the transducer can echo.
     facing = (dx * (-p0y) - dy * (-p0x)) > _EPS
 
-    t_lo = np.zeros_like(p0x)
-    t_hi = np.ones_like(p0x)
-    feasible = facing
     with np.errstate(divide="ignore", invalid="ignore"):
-        for sign in (-1.0, 1.0):
-            # Half-plane of the cone's edge ray u: sign * cross(u, p) >= 0 keeps the inside.
-            ang = bearings_rad[:, None] - sign * half_angle_rad
-            ux = np.cos(ang)
-            uy = np.sin(ang)
-            c0 = sign * (ux * p0y - uy * p0x)
-            c1 = sign * (ux * dy - uy * dx)
-            root = -c0 / c1
-            pos = c1 > _EPS
-            neg = c1 < -_EPS
-            flat = ~(pos | neg)
-            t_lo = np.where(pos, np.maximum(t_lo, root), t_lo)
-            t_hi = np.where(neg, np.minimum(t_hi, root), t_hi)
-            feasible &= ~(flat & (c0 < 0))
-        feasible &= t_lo <= t_hi
+        # Both edges of the cone at once, the right one (sign -1) first: the half-plane of the edge
+        # ray u, sign * cross(u, p) >= 0, keeps the inside.
+        sign = _EDGE_SIGNS
+        ang = bearings_rad[:, None] - sign * half_angle_rad  # (2, n, 1)
+        ux = np.cos(ang)
+        uy = np.sin(ang)
+        c0 = sign * (ux * p0y - uy * p0x)
+        c1 = sign * (ux * dy - uy * dx)
+        root = -c0 / c1
+        pos = c1 > _EPS
+        neg = c1 < -_EPS
+        # The segment's stretch inside both: from the largest entry (at least 0) to the smallest
+        # exit (at most 1), taken edge after edge.
+        lo = np.where(pos, root, -np.inf)
+        hi = np.where(neg, root, np.inf)
+        t_lo = np.maximum(np.maximum(np.zeros_like(p0x), lo[0]), lo[1])
+        t_hi = np.minimum(np.minimum(np.ones_like(p0x), hi[0]), hi[1])
+        parallel_outside = ~(pos | neg) & (c0 < 0)
+        feasible = facing & ~parallel_outside[0] & ~parallel_outside[1] & (t_lo <= t_hi)
 
         # np.clip's arithmetic (max, then min) without its overhead.
         t_star = np.minimum(np.maximum(-(p0x * dx + p0y * dy) / walls.len2_floor, t_lo), t_hi)
@@ -116,8 +118,8 @@ def specular_miss_probability(incidence_rad: NDArray[np.float64], noise: SimNois
     full = math.radians(noise.specular_full_deg)
     if full <= onset:
         ramp = (incidence_rad >= onset).astype(float)
-    else:
-        ramp = np.clip((incidence_rad - onset) / (full - onset), 0.0, 1.0)
+    else:  # np.clip's arithmetic (max, then min) without its overhead
+        ramp = np.minimum(np.maximum((incidence_rad - onset) / (full - onset), 0.0), 1.0)
     return noise.specular_miss_prob * ramp
 
 
@@ -155,8 +157,10 @@ def simulate_ranges(
     reading = true_range + sigma * rng.standard_normal(n)
 
     false_echo = rng.random(n) < noise.false_echo_prob
-    upper = np.clip(
-        np.where(np.isfinite(true_range), true_range, model.max_range_m), model.min_range_m, model.max_range_m
+    # np.clip's arithmetic (max, then min) without its overhead, here and at the end.
+    upper = np.minimum(
+        np.maximum(np.where(np.isfinite(true_range), true_range, model.max_range_m), model.min_range_m),
+        model.max_range_m,
     )
     short = model.min_range_m + (upper - model.min_range_m) * rng.random(n)
     reading = np.where(false_echo, short, reading)
@@ -164,4 +168,4 @@ def simulate_ranges(
     reading = np.where(dropout | ~np.isfinite(reading), model.max_range_m, reading)
     if noise.range_quantum_m > 0:
         reading = np.round(reading / noise.range_quantum_m) * noise.range_quantum_m
-    return np.clip(reading, model.min_range_m, model.max_range_m)
+    return np.minimum(np.maximum(reading, model.min_range_m), model.max_range_m)
