@@ -9,10 +9,9 @@ explains (slip, bumps), the encoder variance is inflated: Borenstein & Feng's gy
 
 from __future__ import annotations
 
-import functools
 import math
-from collections.abc import Callable, Sequence
-from typing import Any, NamedTuple
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
@@ -50,16 +49,6 @@ class PoseEstimate(NamedTuple):
         return Pose(self.x, self.y, self.theta)
 
 
-def _lapack_inverse() -> Callable[..., Any]:
-    """The LAPACK routine np.linalg.inv calls, without its argument checks and error-state context
-    (the same numbers, in a quarter of the time for the filter's 2 x 2 innovation covariance, which
-    its measurement noise keeps invertible); np.linalg.inv itself where numpy does not expose it."""
-    routine = getattr(getattr(np.linalg, "_umath_linalg", None), "inv", None)
-    if routine is None:
-        return np.linalg.inv
-    return functools.partial(routine, signature="d->d")
-
-
 def wrap_angle(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
@@ -72,7 +61,6 @@ class DeadReckoning:
         self.config = cfg = config or LocalizationConfig()
         self._kf = KalmanFilter(dim_x=3, dim_z=2)
         kf = self._kf
-        kf.inv = _lapack_inverse()  # filterpy's hook for the inverse it uses in every update
         kf.x = np.array([start.theta, 0.0, 0.0])
         kf.P = np.diag([1e-8, 1e-4, cfg.initial_bias_std_rad_s**2])
         # z = [gyro rate, turn rate]: the gyro reads rate + bias; the turn rate comes from the encoders,
