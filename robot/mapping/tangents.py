@@ -119,12 +119,11 @@ class TangentLines:
         np.add.at(acc, (base + 1).ravel(), frac.ravel())
         free = np.ones(n, dtype=bool)  # echoes no wall has taken yet
         found: list[Line] = []
-        tried = np.zeros(acc.size, dtype=bool)
         while True:
-            peak = int(np.argmax(np.where(tried, 0.0, acc)))
+            peak = int(np.argmax(acc))
             if acc[peak] < p.min_votes:
                 return found
-            tried[peak] = True
+            acc[peak] = -np.inf  # tried
             t_i, d_i = divmod(peak, n_d)
             walls, near = self._refine(t_i * self._step, (d_i + d0) * p.d_step_m, free)
             if not walls:
