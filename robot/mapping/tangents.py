@@ -159,23 +159,34 @@ class TangentLines:
         """The line near (theta, d) that the most ``free`` echoes fit, as the stretches of wall
         they touch, and the echoes that support it."""
         p = self.params
+        turns = np.radians(np.arange(-1.0, 1.01, 0.1))
+        # The echoes that can support a line within those turns (an echo's tangent distance moves by
+        # at most the turn times its distance from the origin), so the search runs over them alone.
+        most = float(np.max(np.abs(turns))) + 1e-9
+        reach = most * np.hypot(self._x, self._y)
+        facing = np.abs(np.remainder(theta - self._axis + math.pi, 2 * math.pi) - math.pi) <= self.half + most
+        dist0 = math.cos(theta) * self._x + math.sin(theta) * self._y + self._r
+        idx = np.flatnonzero(free & facing & (np.abs(dist0 - d) <= 2.0 * p.tolerance_m + reach))
+        x, y, axis, r = self._x[idx], self._y[idx], self._axis[idx], self._r[idx]
         best: tuple[float, float, float, NDArray[np.bool_]] | None = None  # theta, d, score, echoes
-        for th in theta + np.radians(np.arange(-1.0, 1.01, 0.1)):
-            inside = free & (np.abs(np.remainder(th - self._axis + math.pi, 2 * math.pi) - math.pi) <= self.half)
-            dist = math.cos(th) * self._x + math.sin(th) * self._y + self._r
-            near = inside & (np.abs(dist - d) <= p.tolerance_m)
-            if np.count_nonzero(near) < p.min_votes:
+        for th in theta + turns:
+            inside = np.abs(np.remainder(th - axis + math.pi, 2 * math.pi) - math.pi) <= self.half
+            dist = math.cos(th) * x + math.sin(th) * y + r
+            near_sub = inside & (np.abs(dist - d) <= p.tolerance_m)
+            if np.count_nonzero(near_sub) < p.min_votes:
                 continue
-            centre = float(np.median(dist[near]))
-            near = inside & (np.abs(dist - centre) <= p.tolerance_m)
+            centre = float(np.median(dist[near_sub]))
+            near_sub = inside & (np.abs(dist - centre) <= p.tolerance_m)
             # Many echoes close to the line: a turned line that keeps only the closest few of them
             # scatters less but is not the wall.
-            score = float(np.sum(1.0 - ((dist[near] - centre) / p.tolerance_m) ** 2))
+            score = float(np.sum(1.0 - ((dist[near_sub] - centre) / p.tolerance_m) ** 2))
             if best is None or score > best[2]:
-                best = (float(th), centre, score, near)
+                best = (float(th), centre, score, near_sub)
         if best is None:
             return [], np.zeros_like(free)
-        th, centre, _, near = best
+        th, centre, _, near_sub = best
+        near = np.zeros_like(free)
+        near[idx[near_sub]] = True
         c, s = math.cos(th), math.sin(th)
         dist = c * self._x[near] + s * self._y[near] + self._r[near]
         if float(np.sqrt(np.mean((dist - centre) ** 2))) > p.max_scatter_m:
