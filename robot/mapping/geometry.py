@@ -64,9 +64,6 @@ class Cones:
     cells: ConeCells
     starts: NDArray[np.int64]  # one more than there are beams
 
-    def of(self, i: int) -> slice:
-        return slice(int(self.starts[i]), int(self.starts[i + 1]))
-
 
 def _bounds(
     grid: GridSpec, beam: Beam, half_angle_rad: float, reach: float, half_ap: float, c: float, s: float
