@@ -496,8 +496,8 @@ class LogOddsMapper:
         """Map cells that the straight walls the echoes agree on cut into, except where the robot's
         body has been on the far side of the wall (then it is not a wall there: a doorway, say)."""
         occupied = self.logodds >= self.params.occ_threshold
-        xs, ys = self.fine.centers()
-        xs, ys, body = xs[self._inner], ys[self._inner], self._body[self._inner]
+        rows, cols = self._inner
+        xs, ys, body = self._centre_x[None, cols], self._centre_y[rows, None], self._body[self._inner]
         cut = np.zeros(self.frame.grid.shape, dtype=bool)
         for wall in tangents.lines():
             if not tangents.on_evidence(wall, self.fine, occupied):
@@ -506,7 +506,7 @@ class LogOddsMapper:
                 continue
             cells = tangents.cut_cells(self.frame.grid, [wall])
             if cells.any():
-                past = body & (math.cos(wall.theta) * xs + math.sin(wall.theta) * ys > wall.d)
+                past = body & (wall.depth(xs, ys) > 0.0)
                 cut |= cells & ~(self._block_counts(past) > 0)
         return cut & ~self._outside
 

@@ -53,6 +53,11 @@ class TangentParams(BaseModel):
     min_axis_angle_deg: float = Field(default=3.0, ge=0.0, le=45.0)
 
 
+def _off(theta: float, axes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """How far each of ``axes`` points from direction ``theta`` [rad], in [0, pi]."""
+    return np.abs(np.remainder(theta - axes + math.pi, 2 * math.pi) - math.pi)
+
+
 @dataclass(frozen=True)
 class Line:
     """Points p with n . p = d, n = (cos theta, sin theta) pointing from the room into the wall;
@@ -64,6 +69,10 @@ class Line:
     s1: float
     echoes: int
     scatter: float
+
+    def depth(self, xs: NDArray[np.float64], ys: NDArray[np.float64]) -> NDArray[np.float64]:
+        """How far points lie past the line into the wall [m] (negative: on the room's side)."""
+        return math.cos(self.theta) * xs + math.sin(self.theta) * ys - self.d
 
 
 class TangentLines:
@@ -125,7 +134,7 @@ class TangentLines:
                 return found
             acc[peak] = -np.inf  # tried
             t_i, d_i = divmod(peak, n_d)
-            walls, near = self._refine(t_i * self._step, (d_i + d0) * p.d_step_m, free)
+            walls = self._refine(t_i * self._step, (d_i + d0) * p.d_step_m, free)
             if not walls:
                 continue
             # A line close to a stronger one and nearly parallel is the same wall, seen while the
@@ -136,7 +145,7 @@ class TangentLines:
             # same wall would otherwise make a second wall beside it.
             c, s = math.cos(line.theta), math.sin(line.theta)
             dist = c * self._x + s * self._y + self._r
-            facing = np.abs(np.remainder(line.theta - self._axis + math.pi, 2 * math.pi) - math.pi) <= self.half
+            facing = _off(line.theta, self._axis) <= self.half
             near = free & facing & (np.abs(dist - line.d) <= p.clear_m)
             free &= ~near
             np.subtract.at(acc, base[near].ravel(), (1.0 - frac[near]).ravel())
@@ -155,22 +164,22 @@ class TangentLines:
         edges = ((0.0, max_x), (math.pi / 2, max_y), (math.pi, -min_x), (-math.pi / 2, -min_y))
         return any(self._same(line, Line(theta, d, 0.0, 0.0, 0, 0.0)) for theta, d in edges)
 
-    def _refine(self, theta: float, d: float, free: NDArray[np.bool_]) -> tuple[list[Line], NDArray[np.bool_]]:
+    def _refine(self, theta: float, d: float, free: NDArray[np.bool_]) -> list[Line]:
         """The line near (theta, d) that the most ``free`` echoes fit, as the stretches of wall
-        they touch, and the echoes that support it."""
+        they touch."""
         p = self.params
         turns = np.radians(np.arange(-1.0, 1.01, 0.1))
         # The echoes that can support a line within those turns (an echo's tangent distance moves by
         # at most the turn times its distance from the origin), so the search runs over them alone.
         most = float(np.max(np.abs(turns))) + 1e-9
         reach = most * np.hypot(self._x, self._y)
-        facing = np.abs(np.remainder(theta - self._axis + math.pi, 2 * math.pi) - math.pi) <= self.half + most
+        facing = _off(theta, self._axis) <= self.half + most
         dist0 = math.cos(theta) * self._x + math.sin(theta) * self._y + self._r
         idx = np.flatnonzero(free & facing & (np.abs(dist0 - d) <= 2.0 * p.tolerance_m + reach))
         x, y, axis, r = self._x[idx], self._y[idx], self._axis[idx], self._r[idx]
         best: tuple[float, float, float, NDArray[np.bool_]] | None = None  # theta, d, score, echoes
         for th in theta + turns:
-            inside = np.abs(np.remainder(th - axis + math.pi, 2 * math.pi) - math.pi) <= self.half
+            inside = _off(th, axis) <= self.half
             dist = math.cos(th) * x + math.sin(th) * y + r
             near_sub = inside & (np.abs(dist - d) <= p.tolerance_m)
             if np.count_nonzero(near_sub) < p.min_votes:
@@ -183,14 +192,14 @@ class TangentLines:
             if best is None or score > best[2]:
                 best = (float(th), centre, score, near_sub)
         if best is None:
-            return [], np.zeros_like(free)
+            return []
         th, centre, _, near_sub = best
         near = np.zeros_like(free)
         near[idx[near_sub]] = True
         c, s = math.cos(th), math.sin(th)
         dist = c * self._x[near] + s * self._y[near] + self._r[near]
         if float(np.sqrt(np.mean((dist - centre) ** 2))) > p.max_scatter_m:
-            return [], near
+            return []
         fx = self._x[near] + self._r[near] * c  # where each echo touches the line
         fy = self._y[near] + self._r[near] * s
         along = -s * fx + c * fy
@@ -215,7 +224,7 @@ class TangentLines:
                 continue
             scatter = float(np.sqrt(np.mean((dist[piece] - centre) ** 2)))
             walls.append(Line(th, centre, s0, s1, int(piece.size), scatter))
-        return walls, near
+        return walls
 
     def on_evidence(self, line: Line, fine: GridSpec, occupied: NDArray[np.bool_]) -> bool:
         """Whether the evidence grid shows a surface along ``line``: an occupied cell within a few
@@ -245,7 +254,7 @@ class TangentLines:
             if off_axis < math.radians(self.params.min_axis_angle_deg):
                 continue
             c, s = math.cos(line.theta), math.sin(line.theta)
-            depth = c * xs + s * ys - line.d  # > 0: inside the wall
+            depth = line.depth(xs, ys)
             reach = half * (abs(c) + abs(s))  # how far a cell's corners reach from its centre
             along = -s * xs + c * ys
             cut = (depth - reach < 0.0) & (depth + reach >= self.params.margin_m)
