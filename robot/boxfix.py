@@ -42,6 +42,11 @@ class BoxFixConfig(BaseModel):
     # than the sonar gate: a bump is unambiguous, and it comes when the estimate is off the most.
     contact_gate_m: float = Field(default=0.15, ge=0.0)
     contact_max_angle_deg: float = Field(default=50.0, gt=0.0, lt=90.0)
+    # ... and only where the map shows that edge as a wall over +-this along it (at least the body's
+    # width; the box's own corners end it). Where two walls of a room that is not a box meet at a
+    # corner on a box edge, echo arcs smear the corner along the edge over about the body's width,
+    # and a bump into either wall, short of the edge, was taken for the box wall.
+    contact_support_m: float = Field(default=0.5, ge=0.0)
 
 
 def edge_supported(
@@ -51,8 +56,10 @@ def edge_supported(
     outward: float,
     half_width: float,
     config: BoxFixConfig,
+    span: tuple[float, float] | None = None,
 ) -> bool:
-    """Whether the evidence shows a wall along the box edge through ``hit`` over +-``half_width``.
+    """Whether the evidence shows a wall along the box edge through ``hit`` over +-``half_width``
+    (clipped to ``span``, the edge's own extent along it, when given).
 
     ``horizontal``: the beam runs along x (the edge is a vertical line); ``outward``: +1 or -1, the
     direction out of the box along the beam.
@@ -60,6 +67,11 @@ def edge_supported(
     g = evidence.grid
     f = g.resolution
     along = np.arange(-half_width, half_width + 1e-9, f)
+    if span is not None:
+        at = hit[1] if horizontal else hit[0]
+        along = along[(at + along >= span[0]) & (at + along <= span[1])]
+        if along.size == 0:
+            return False
     across = np.arange(-config.edge_band_m[0], config.edge_band_m[1] + 1e-9, f / 2) * outward
     # Points (along, across) on a grid: the row of a point depends on its y alone and the column on
     # its x, so each is converted once per line of points (GridSpec.world_to_index, broadcast).

@@ -192,7 +192,9 @@ class WallFixes:
             if abs(offset) > gate or (best is not None and abs(offset) >= best[0]):
                 continue
             hit = (edge, pose.y) if axis == 0 else (pose.x, edge)
-            if evidence is None or not edge_supported(evidence, hit, axis == 0, sign, 2 * radius, self.box):
+            half = max(2 * radius, self.box.contact_support_m)
+            span = (min_y, max_y) if axis == 0 else (min_x, max_x)
+            if evidence is None or not edge_supported(evidence, hit, axis == 0, sign, half, self.box, span):
                 continue
             best = (abs(offset), axis, offset)
         if best is None:

@@ -452,7 +452,7 @@ def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
 
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
-    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in np.arange(0.6, 1.4, 0.05)])
+    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in np.arange(0.0, 2.0, 0.05)])
     fixes = WallFixes(frame, ROBOT, BoxFixConfig(), HeadingFixConfig())
 
     def bump(believed: Pose, direction_deg: float, evidence) -> tuple[Pose, bool, tuple[float, float]]:
@@ -473,6 +473,35 @@ def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
     before = Pose(2.0 - ROBOT.radius_m - 0.05, 1.0, 0.0)
     pose, unexplained, _ = bump(before, 0.0, _evidence_with_solid(frame, [(2.02, 1.0)]))
     assert unexplained and pose == before
+
+
+def test_a_bump_where_a_corner_touches_the_box_edge_is_not_a_box_fix() -> None:
+    """Where two walls of a room that is not a box meet at a corner on a box edge, the map shows the
+    edge solid around the corner (echo arcs smear it) but nowhere else along it: a bump into one of
+    those walls, a few centimetres short of the box edge, is not the box wall. Along a box wall,
+    a bump near the box's own corner still fixes the position (the check stops at the corner)."""
+    from robot.boxfix import BoxFixConfig
+    from robot.headingfix import HeadingFixConfig, WallFixes
+
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    frame = MapFrame(grid=grid, start=Pose(1.5, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
+    fixes = WallFixes(frame, ROBOT, BoxFixConfig(), HeadingFixConfig())
+    rising = np.arange(0.0, 1.2, 0.025)
+    corner = [(1.5 - t * math.cos(math.radians(20)), t * math.sin(math.radians(20))) for t in rising]
+    corner += [(1.5 + t * math.cos(math.radians(25)), t * math.sin(math.radians(25))) for t in rising]
+    corner += [(float(x), -0.01) for x in np.arange(1.35, 1.66, 0.05)]  # the smear at the corner
+    believed = Pose(1.55, ROBOT.radius_m + 0.08, 0.0)  # 8 cm short of touching the box edge
+    dr = DeadReckoning(ROBOT, believed)
+    pose, unexplained = fixes.contact(dr, believed, math.radians(-90.0), _evidence_with_solid(frame, corner))
+    assert unexplained and pose == believed and (dr.estimate.x, dr.estimate.y) == (believed.x, believed.y)
+
+    # The same bump next to the box's corner, with the bottom wall solid along its whole length.
+    along = np.arange(0.0, 3.0, 0.05)
+    wall = [(float(x), -0.01) for x in along] + [(-0.01, float(y)) for y in along]
+    believed = Pose(0.15, ROBOT.radius_m + 0.08, 0.0)
+    dr = DeadReckoning(ROBOT, believed)
+    pose, unexplained = fixes.contact(dr, believed, math.radians(-90.0), _evidence_with_solid(frame, wall))
+    assert not unexplained and (pose.x, pose.y) == pytest.approx((0.15, ROBOT.radius_m))
 
 
 def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
@@ -503,7 +532,8 @@ def _position_error_p90(result: RunResult) -> float:
 def _evidence_with_solid(frame: MapFrame, solid_xy: list[tuple[float, float]]):
     from robot.mapping.base import Evidence
 
-    fine = GridSpec(frame.grid.origin_x - 0.3, frame.grid.origin_y - 0.3, 0.05, 52, 52)
+    side = round((frame.grid.cols * frame.grid.resolution + 0.6) / 0.05)
+    fine = GridSpec(frame.grid.origin_x - 0.3, frame.grid.origin_y - 0.3, 0.05, side, side)
     logodds = np.zeros(fine.shape, dtype=np.float32)
     for x, y in solid_xy:
         r, c = fine.world_to_index(x, y)
