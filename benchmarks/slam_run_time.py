@@ -18,10 +18,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3, help="runs per room (seeds 0..N-1), default 3")
     parser.add_argument("--resolution", type=float, default=0.2, help="map cell side [m], default 0.2")
     parser.add_argument("--mapper", choices=("logodds", "paper"), default=None)
+    parser.add_argument("--walk", action="store_true", help="walk every cell, as the paper's robot does")
     parser.add_argument("rooms", nargs="*", default=list(ROOMS))
     args = parser.parse_args(argv)
-    cfg = load_run_config(None, {"resolution": args.resolution, "mapper": args.mapper})
-    print(f"whole runs at {args.resolution} m, {cfg.slam.mapper} mapper, median of {args.seeds} seed(s)")
+    overrides = {"resolution": args.resolution, "mapper": args.mapper, "end_when_mapped": not args.walk}
+    cfg = load_run_config(None, overrides)
+    ending = "walking every cell" if args.walk else "ending when mapped"
+    print(f"whole runs at {args.resolution} m, {cfg.slam.mapper} mapper, {ending}, median of {args.seeds} seed(s)")
     heads = ("wall s", "min", "max", "sim s", "sim/wall", "steps", "ms/step")
     print(f"{'world':<8s} " + " ".join(f"{h:>8s}" for h in heads))
     for name in args.rooms:

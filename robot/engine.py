@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from robot.config import RobotConfig
 from robot.explore import Action, Explorer
-from robot.grid import OCCUPIED, UNKNOWN
+from robot.grid import OCCUPIED, UNKNOWN, lone_occupied
 from robot.hardware import Hardware
 from robot.headingfix import WallFixes
 from robot.localization import DeadReckoning, PoseEstimate
@@ -98,6 +98,7 @@ class SlamEngine:
         self.explorer = Explorer(frame.grid, block, (0, 0), max_inspections=config.max_inspections)
         self.explorer.start_cell = self.explorer.nav_cell_of(frame.start.x, frame.start.y)
         self.stats = EngineStats(last_change_t=hw.now())
+        self._last_change_step = 0  # the step at which the belief last changed
         self._exported = frame.grid.empty()
         self._belief = frame.grid.empty()
         self._passable = np.zeros(frame.grid.shape, dtype=bool)
@@ -177,6 +178,7 @@ class SlamEngine:
             # map: in a large hall the area explored beyond a strip not yet seen free to the end is
             # grey in the export (not reachable from the start) while the robot maps it.
             self.stats.last_change_t = self.hw.now()
+            self._last_change_step = self.stats.steps
             exported = classify(belief, self.frame.start_cell)
         self._belief = belief
         self._free_fraction = self.mapper.free_fraction()
@@ -197,6 +199,16 @@ class SlamEngine:
             frontier_cells=frontier,
             moved_ok=ok,
         )
+
+    def _mapped(self) -> bool:
+        """Whether the map is finished: nothing left to resolve in reach, no change of the belief for
+        ``settle_steps`` steps, and no occupied cell alone in free floor (a stray echo, which the
+        sweeps of the rest of the walk would clear, or a chair leg: then the walk goes on)."""
+        if not self.config.end_when_mapped or self.stats.steps - self._last_change_step < self.config.settle_steps:
+            return False
+        if self.explorer.frontier(self._belief, self._passable, self._doubtful()).any():
+            return False
+        return not lone_occupied(self._belief).any()
 
     def _doubtful(self) -> NDArray[np.bool_] | None:
         """Occupied cells (not the room's surveyed wall) that touch unknown space: worth a closer look."""
@@ -275,6 +287,8 @@ class SlamEngine:
             result = self._refresh("done", None, True)
             return self._finish(result, action.reason or "complete")
 
+        if self._mapped():
+            return self._finish(result, "complete")
         now = self.hw.now()
         if now - self.stats.last_change_t > self.config.time_limit_s:
             return self._finish(result, "time_limit")

@@ -105,3 +105,17 @@ class GridSpec:
     def empty(self) -> NDArray[np.int8]:
         """An all-grey state grid."""
         return np.full(self.shape, UNKNOWN, dtype=np.int8)
+
+
+def lone_occupied(states: NDArray[np.int8]) -> NDArray[np.bool_]:
+    """Occupied cells whose eight neighbours are all free (cells off the grid count as not free):
+    a chair leg, or a stray echo that sweeps from elsewhere would clear."""
+    rows, cols = states.shape
+    not_free = np.ones((rows + 2, cols + 2), dtype=bool)
+    not_free[1:-1, 1:-1] = states != FREE
+    neighbours = np.zeros((rows, cols), dtype=bool)
+    for dr in range(3):
+        for dc in range(3):
+            if dr != 1 or dc != 1:
+                neighbours |= not_free[dr : dr + rows, dc : dc + cols]
+    return (states == OCCUPIED) & ~neighbours

@@ -12,7 +12,7 @@ from robot.config import RobotConfig, SimNoise
 from robot.engine import SlamEngine, classify
 from robot.errors import ConfigError
 from robot.explore import CLOCKWISE, Explorer, direction_index
-from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, lone_occupied
 from robot.hardware import EncoderCounts, ImuBatch, ImuSample
 from robot.localization import DeadReckoning
 from robot.mapping import make_mapper
@@ -355,6 +355,46 @@ def test_step_deltas_rebuild_the_exported_map() -> None:
     assert np.array_equal(rebuilt, engine.map_states())
     _, truth = truth_grid(world, 0.2)
     assert score(rebuilt, truth).cell_errors <= 3  # an empty 2 x 1.6 m room: 80 cells, all white
+
+
+def test_lone_occupied_cells_are_those_in_free_floor() -> None:
+    states = np.full((6, 7), FREE, dtype=np.int8)
+    states[1, 1] = OCCUPIED  # alone
+    states[3, 3:5] = OCCUPIED  # two together
+    states[1, 5] = OCCUPIED  # next to unknown space
+    states[0, 6] = UNKNOWN
+    states[5, 0] = OCCUPIED  # on the grid's edge: what lies beyond is not known free
+    lone = lone_occupied(states)
+    assert lone.tolist() == (np.arange(42).reshape(6, 7) == 8).tolist()
+
+
+def test_an_open_room_ends_once_it_is_mapped() -> None:
+    """An empty room is mapped long before the depth-first walk has stood in every cell."""
+    world = load_world("room1")
+    cfg = load_run_config()
+    walked = simulate(world, cfg.robot, cfg.noise, load_run_config(None, {"end_when_mapped": False}).slam, seed=0)
+    mapped = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    assert walked.terminated_by == mapped.terminated_by == "complete"
+    assert mapped.steps < walked.steps / 4
+    assert mapped.metrics.f1 == walked.metrics.f1 == 1.0
+
+
+def test_a_run_ends_early_only_on_a_settled_map_without_stray_cells() -> None:
+    engine = small_engine(small_world(), seed=0)
+    for _ in range(3):
+        engine.step()
+    belief = np.full(engine.map_states().shape, FREE, dtype=np.int8)
+    belief[engine._outside] = OCCUPIED
+    engine._belief = belief
+    engine._last_change_step = engine.stats.steps - engine.config.settle_steps
+    assert engine._mapped()
+    engine._last_change_step += 1  # the map changed too recently
+    assert not engine._mapped()
+    engine._last_change_step -= 1
+    belief[4, 5] = OCCUPIED  # a black cell alone in free floor
+    assert not engine._mapped()
+    belief[4, 5] = UNKNOWN  # an unresolved cell in reach
+    assert not engine._mapped()
 
 
 def test_stopping_early_keeps_the_partial_map() -> None:

@@ -201,7 +201,7 @@ def test_steps_carry_only_what_changed_and_timing_only_on_request(make_server: A
             steps["timed"].append(msg)
 
     with server.client() as api:
-        run_id = start_run(api, world="room1", max_steps=120)
+        run_id = start_run(api, world="room3", max_steps=120)
         url = f"{server.ws_url}/ws/runs/{run_id}"
 
         async def both() -> list[Viewer]:
