@@ -184,6 +184,7 @@ class WallFixes:
         radius = self.robot.radius_m
         along = (math.cos(direction_rad), math.sin(direction_rad))
         head_on = math.cos(math.radians(self.box.contact_max_angle_deg))
+        half = max(2 * radius, self.box.contact_support_m)  # how far along the edge the map must show it
         best: tuple[float, int, float] | None = None  # |offset|, axis, offset
         for axis, sign, edge in ((0, 1.0, max_x), (0, -1.0, min_x), (1, 1.0, max_y), (1, -1.0, min_y)):
             if sign * along[axis] < head_on:
@@ -192,7 +193,6 @@ class WallFixes:
             if abs(offset) > gate or (best is not None and abs(offset) >= best[0]):
                 continue
             hit = (edge, pose.y) if axis == 0 else (pose.x, edge)
-            half = max(2 * radius, self.box.contact_support_m)
             span = (min_y, max_y) if axis == 0 else (min_x, max_x)
             if evidence is None or not edge_supported(evidence, hit, axis == 0, sign, half, self.box, span):
                 continue
