@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from robot.grid import GridSpec
-from robot.mapping.tangents import Line, TangentLines, TangentParams
+from robot.mapping.tangents import Line, TangentLines, TangentParams, _off, _trimmed_ends
 
 HALF = math.radians(15.0)
 
@@ -117,3 +117,61 @@ def test_straight_walls_recover_cells_that_angled_walls_clip() -> None:
     assert with_walls.trajectory == without.trajectory
     assert with_walls.metrics.recall > without.metrics.recall
     assert with_walls.metrics.f1 > without.metrics.f1
+
+
+def test_trimmed_ends_are_numpys_percentiles() -> None:
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 15, 16, 40, 101):
+        for _ in range(20):
+            values = rng.normal(0.0, rng.uniform(0.01, 5.0), n)
+            for percent in (0.0, 2.5, 5.0, 25.0, 49.0):
+                expected = np.percentile(values, [percent, 100.0 - percent])
+                assert _trimmed_ends(values, percent) == (float(expected[0]), float(expected[1]))
+
+
+def _best_turn_one_by_one(lines: TangentLines, theta: float, d: float, free: np.ndarray):
+    """The search for the best turned line written one turn at a time over every echo, with
+    np.median: what the vectorised search must reproduce exactly."""
+    p = lines.params
+    best = None
+    for th in theta + np.radians(np.arange(-1.0, 1.01, 0.1)):
+        inside = _off(th, lines._axis) <= lines.half
+        dist = math.cos(th) * lines._x + math.sin(th) * lines._y + lines._r
+        near = free & inside & (np.abs(dist - d) <= p.tolerance_m)
+        if np.count_nonzero(near) < p.min_votes:
+            continue
+        centre = float(np.median(dist[near]))
+        near = free & inside & (np.abs(dist - centre) <= p.tolerance_m)
+        score = float(np.sum(1.0 - ((dist[near] - centre) / p.tolerance_m) ** 2))
+        if best is None or score > best[2]:
+            best = (float(th), centre, score, near)
+    return None if best is None else (best[0], best[1], best[3])
+
+
+def test_the_search_over_turns_picks_the_line_a_turn_by_turn_search_picks() -> None:
+    rng = np.random.default_rng(5)
+    lines = TangentLines(HALF, TangentParams(enabled=True))
+    walls = ((math.radians(20.0), 2.0), (math.radians(200.0), 1.2), (math.radians(95.0), 1.6))
+    for theta, d in walls:
+        t = (-math.sin(theta), math.cos(theta))
+        places = []
+        for s in np.arange(-0.5, 0.51, 0.1):
+            for dist in (0.45, 0.7, 0.9):
+                foot = (d * math.cos(theta) + s * t[0], d * math.sin(theta) + s * t[1])
+                places.append((foot[0] - dist * math.cos(theta), foot[1] - dist * math.sin(theta)))
+        lines.add(*_echoes_off_line(theta, d, places, rng, 0.008))
+    assert len(lines.lines()) == 3  # (this also gathers the echoes into arrays)
+    free = rng.random(lines._r.size) < 0.8  # some echoes already taken by other walls
+    tried = 0
+    for theta, d in walls:
+        for dt, dd in ((0.0, 0.0), (0.01, 0.01), (-0.012, -0.02), (0.004, 0.05), (0.3, 0.0)):
+            expected = _best_turn_one_by_one(lines, theta + dt, d + dd, free)
+            got = lines._best_turn(theta + dt, d + dd, free)
+            if expected is None:
+                assert got is None
+                continue
+            tried += 1
+            assert got is not None
+            assert got[0] == expected[0] and got[1] == expected[1]
+            assert np.array_equal(got[2], expected[2])
+    assert tried >= 9

@@ -58,6 +58,29 @@ def _off(theta: float, axes: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.abs(np.remainder(theta - axes + math.pi, 2 * math.pi) - math.pi)
 
 
+def _off_many(thetas: NDArray[np.float64], axes: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``_off`` for each of ``thetas``: one row per direction."""
+    return np.abs(np.remainder(thetas[:, None] - axes[None, :] + math.pi, 2 * math.pi) - math.pi)
+
+
+def _trimmed_ends(values: NDArray[np.float64], percent: float) -> tuple[float, float]:
+    """``np.percentile(values, [percent, 100 - percent])`` with its default (linear) method, the same
+    numbers without the overhead, which dominated the search for walls."""
+    ordered = np.sort(values)
+    n = ordered.size
+    ends = []
+    for q in (percent / 100.0, (100.0 - percent) / 100.0):
+        virtual = (n - 1) * q  # numpy's fractional index for the linear method
+        if virtual >= n - 1:
+            ends.append(float(ordered[-1]))
+            continue
+        lo = math.floor(virtual)
+        t = virtual - lo
+        a, b = float(ordered[lo]), float(ordered[lo + 1])
+        ends.append(b - (b - a) * (1.0 - t) if t >= 0.5 else a + (b - a) * t)
+    return ends[0], ends[1]
+
+
 @dataclass(frozen=True)
 class Line:
     """Points p with n . p = d, n = (cos theta, sin theta) pointing from the room into the wall;
@@ -84,7 +107,7 @@ class TangentLines:
         self._step = math.radians(p.theta_step_deg)
         self.n_theta = max(1, round(2 * math.pi / self._step))
         self._chunks: list[NDArray[np.float64]] = []  # per sweep: rows x, y, axis, range
-        self._x = self._y = self._axis = self._r = np.zeros(0)
+        self._x = self._y = self._axis = self._r = self._norm = np.zeros(0)
 
     def add(self, xs: list[float], ys: list[float], axes: list[float], ranges: list[float]) -> None:
         """One sweep's echoes: transducer positions [m], beam axes [rad] and ranges [m]."""
@@ -126,6 +149,7 @@ class TangentLines:
         base = tb * n_d + (lo - d0).astype(np.int64)
         np.add.at(acc, base.ravel(), (1.0 - frac).ravel())
         np.add.at(acc, (base + 1).ravel(), frac.ravel())
+        self._norm = np.hypot(self._x, self._y)  # each transducer place's distance from the origin
         free = np.ones(n, dtype=bool)  # echoes no wall has taken yet
         found: list[Line] = []
         while True:
@@ -164,38 +188,56 @@ class TangentLines:
         edges = ((0.0, max_x), (math.pi / 2, max_y), (math.pi, -min_x), (-math.pi / 2, -min_y))
         return any(self._same(line, Line(theta, d, 0.0, 0.0, 0, 0.0)) for theta, d in edges)
 
-    def _refine(self, theta: float, d: float, free: NDArray[np.bool_]) -> list[Line]:
-        """The line near (theta, d) that the most ``free`` echoes fit, as the stretches of wall
-        they touch."""
+    def _best_turn(
+        self, theta: float, d: float, free: NDArray[np.bool_]
+    ) -> tuple[float, float, NDArray[np.bool_]] | None:
+        """The direction within a degree of ``theta``, in tenths, whose line the ``free`` echoes
+        near (theta, d) fit best: the direction, the median distance of those echoes from it, and
+        the echoes within the tolerance of that distance (None if too few echoes are near)."""
         p = self.params
         turns = np.radians(np.arange(-1.0, 1.01, 0.1))
         # The echoes that can support a line within those turns (an echo's tangent distance moves by
         # at most the turn times its distance from the origin), so the search runs over them alone.
         most = float(np.max(np.abs(turns))) + 1e-9
-        reach = most * np.hypot(self._x, self._y)
+        reach = most * self._norm
         facing = _off(theta, self._axis) <= self.half + most
         dist0 = math.cos(theta) * self._x + math.sin(theta) * self._y + self._r
         idx = np.flatnonzero(free & facing & (np.abs(dist0 - d) <= 2.0 * p.tolerance_m + reach))
         x, y, axis, r = self._x[idx], self._y[idx], self._axis[idx], self._r[idx]
-        best: tuple[float, float, float, NDArray[np.bool_]] | None = None  # theta, d, score, echoes
-        for th in theta + turns:
-            inside = _off(th, axis) <= self.half
-            dist = math.cos(th) * x + math.sin(th) * y + r
-            near_sub = inside & (np.abs(dist - d) <= p.tolerance_m)
-            if np.count_nonzero(near_sub) < p.min_votes:
-                continue
-            centre = float(np.median(dist[near_sub]))
-            near_sub = inside & (np.abs(dist - centre) <= p.tolerance_m)
-            # Many echoes close to the line: a turned line that keeps only the closest few of them
-            # scatters less but is not the wall.
-            score = float(np.sum(1.0 - ((dist[near_sub] - centre) / p.tolerance_m) ** 2))
-            if best is None or score > best[2]:
-                best = (float(th), centre, score, near_sub)
+        # Every turn at once, one row each: the echoes inside the cone, those near the seed line, the
+        # median of their distances, and the score of the echoes near that median.
+        ths = theta + turns
+        inside = _off_many(ths, axis) <= self.half
+        dist_all = np.cos(ths)[:, None] * x + np.sin(ths)[:, None] * y + r
+        near_all = inside & (np.abs(dist_all - d) <= p.tolerance_m)
+        counts = np.count_nonzero(near_all, axis=1)
+        rows = np.flatnonzero(counts >= p.min_votes)
+        if rows.size == 0:
+            return None
+        # np.median's numbers: the mean of the middle two of the sorted distances, which for an odd
+        # count are the same one (halving a doubled float is exact).
+        ordered = np.sort(np.where(near_all[rows], dist_all[rows], np.inf), axis=1)
+        k = counts[rows]
+        pick = np.arange(rows.size)
+        centres = 0.5 * (ordered[pick, (k - 1) // 2] + ordered[pick, k // 2])
+        offs = dist_all[rows] - centres[:, None]
+        near_rows = inside[rows] & (np.abs(offs) <= p.tolerance_m)
+        scores = np.where(near_rows, 1.0 - (offs / p.tolerance_m) ** 2, 0.0).sum(axis=1)
+        # Many echoes close to the line: a turned line that keeps only the closest few of them
+        # scatters less but is not the wall. The first best turn wins a tie.
+        top = int(np.argmax(scores))
+        near = np.zeros_like(free)
+        near[idx[near_rows[top]]] = True
+        return float(ths[rows[top]]), float(centres[top]), near
+
+    def _refine(self, theta: float, d: float, free: NDArray[np.bool_]) -> list[Line]:
+        """The line near (theta, d) that the most ``free`` echoes fit, as the stretches of wall
+        they touch."""
+        p = self.params
+        best = self._best_turn(theta, d, free)
         if best is None:
             return []
-        th, centre, _, near_sub = best
-        near = np.zeros_like(free)
-        near[idx[near_sub]] = True
+        th, centre, near = best
         c, s = math.cos(th), math.sin(th)
         dist = c * self._x[near] + s * self._y[near] + self._r[near]
         if float(np.sqrt(np.mean((dist - centre) ** 2))) > p.max_scatter_m:
@@ -212,15 +254,18 @@ class TangentLines:
             if piece.size < p.min_votes:
                 continue
             sel = idx[piece]
-            places = np.unique(np.stack([np.rint(self._x[sel] / 0.05), np.rint(self._y[sel] / 0.05)]), axis=1).shape[1]
+            # The places the echoes came from, on a 5 cm grid (one integer key per grid point).
+            keys = np.rint(self._x[sel] / 0.05) * 1e7 + np.rint(self._y[sel] / 0.05)
+            if np.unique(keys).size < p.min_places:
+                continue
             # Where the wall is: the touch points without the outer few, which near a corner may be
-            # the neighbouring wall's echoes that happen to fit.
-            s0, s1 = (float(v) for v in np.percentile(along[piece], [p.trim_percent, 100.0 - p.trim_percent]))
-            # Echoes from places in a row towards one point agree on lines turned a little off the
-            # row too, touching them over a stretch that grows with the range they span; a wall seen
-            # while driving along it spans a longer stretch than ranges.
-            r0, r1 = np.percentile(self._r[sel], [p.trim_percent, 100.0 - p.trim_percent])
-            if places < p.min_places or s1 - s0 < max(p.min_length_m, p.min_spread_ratio * float(r1 - r0)):
+            # the neighbouring wall's echoes that happen to fit. Echoes from places in a row towards
+            # one point agree on lines turned a little off the row too, touching them over a stretch
+            # that grows with the range they span; a wall seen while driving along it spans a longer
+            # stretch than ranges.
+            s0, s1 = _trimmed_ends(along[piece], p.trim_percent)
+            r0, r1 = _trimmed_ends(self._r[sel], p.trim_percent)
+            if s1 - s0 < max(p.min_length_m, p.min_spread_ratio * (r1 - r0)):
                 continue
             scatter = float(np.sqrt(np.mean((dist[piece] - centre) ** 2)))
             walls.append(Line(th, centre, s0, s1, int(piece.size), scatter))
