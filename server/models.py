@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 RUN_ID_PATTERN = r"^r-[0-9]{8}-[0-9]{4,9}$"
 WORLD_NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
@@ -41,6 +41,11 @@ class RunOptions(_Strict):
         default=None, description='simulator noise: field overrides (see SimNoise), or "off" for an exact simulator'
     )
     max_steps: int | None = Field(default=None, ge=1, le=1_000_000, description="safety cap on engine steps")
+    end_when_mapped: StrictBool | None = Field(
+        default=None,
+        description="end once nothing in reach is unresolved and the map has settled; false walks every cell, "
+        "as the paper's robot does",
+    )
 
 
 class RunDefaults(_Strict):
@@ -54,6 +59,7 @@ class RunDefaults(_Strict):
     time_limit_s: float = Field(gt=0.0, le=1e6)
     noise: NoiseOverrides = Field(default_factory=dict)
     max_steps: int = Field(ge=1, le=1_000_000)
+    end_when_mapped: StrictBool = True
 
 
 class RunCreate(RunOptions):
@@ -97,6 +103,7 @@ class RunView(BaseModel):
     time_limit_s: float
     noise: dict[str, float] | Literal["off"]
     max_steps: int
+    end_when_mapped: bool
     grid: GridInfo
     created_at: str  # ISO 8601, UTC
     started_at: str | None = None

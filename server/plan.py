@@ -25,7 +25,7 @@ from server.errors import field_error
 from server.models import RunDefaults, RunOptions
 from server.worlds import WorldCatalog
 
-SLAM_OPTIONS = ("resolution", "mapper", "time_limit_s", "max_steps")
+SLAM_OPTIONS = ("resolution", "mapper", "time_limit_s", "max_steps", "end_when_mapped")
 MAX_NOISE_VALUE = 1e3  # no noise setting is sensible beyond this, whatever its unit
 
 
@@ -33,7 +33,7 @@ MAX_NOISE_VALUE = 1e3  # no noise setting is sensible beyond this, whatever its 
 class RunPlan:
     """Everything a run needs, checked before it is accepted."""
 
-    options: dict[str, Any]  # world, mapper, resolution, seed, speed ("max" or float), time_limit_s, noise
+    options: dict[str, Any]  # the merged RunDefaults fields
     hardware: str
     world: World | None
     world_text: str | None

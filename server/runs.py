@@ -117,6 +117,7 @@ class RunManager:
             time_limit_s=slam.time_limit_s,
             noise={},
             max_steps=slam.max_steps,
+            end_when_mapped=slam.end_when_mapped,
         )
 
     def defaults(self) -> RunDefaults:
@@ -309,6 +310,7 @@ class RunManager:
             time_limit_s=cfg["time_limit_s"],
             noise=cfg["noise"],
             max_steps=cfg.get("max_steps", 0),
+            end_when_mapped=cfg.get("end_when_mapped", True),
             grid=GridInfo(**record.grid),
             created_at=iso(record.created_at) or "",
             started_at=iso(record.started_at),

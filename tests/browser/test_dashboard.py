@@ -228,6 +228,18 @@ def test_uploaded_world_can_be_chosen_and_run(dashboard: Dashboard, service: Ser
     expected = parse_map_csv(service.api("GET", f"/api/runs/{run_id}/map.csv").text)
     assert page.evaluate("window.sonarslam.cells()") == expected
 
+    # The same world walked cell by cell, as the paper's robot does, instead of ending once mapped.
+    mapped = service.api("GET", f"/api/runs/{run_id}").json()
+    assert mapped["end_when_mapped"] is True
+    full_walk = page.get_by_role("checkbox", name=re.compile("^Walk every cell"))
+    expect(full_walk).not_to_be_checked()
+    full_walk.check()
+    walked_id = dashboard.start_run("tiny-box", speed="max")
+    dashboard.wait_state("s => s.connection === 'ended'", 60)
+    walked = service.api("GET", f"/api/runs/{walked_id}").json()
+    assert walked["end_when_mapped"] is False and walked["terminated_by"] == "complete"
+    assert walked["progress"]["step"] > mapped["progress"]["step"]
+
     # A bad file is refused with the service's reason, shown next to the form.
     page.get_by_label("Add a world (TOML file)").set_input_files(
         files=[{"name": "bad.toml", "mimeType": "text/plain", "buffer": b'name = "bad"\n'}]

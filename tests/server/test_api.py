@@ -142,6 +142,8 @@ def test_config_is_validated_and_persisted(make_server: Any, tmp_path: Path) -> 
         ({"speed": 0}, ["body", "speed"]),
         ({"speed": "fast"}, ["body", "speed"]),
         ({"time_limit_s": -5}, ["body", "time_limit_s"]),
+        ({"end_when_mapped": "sometimes"}, ["body", "end_when_mapped"]),
+        ({"end_when_mapped": 1}, ["body", "end_when_mapped"]),
         ({"noise": {"range_noise_m": -1.0}}, ["body", "noise", "range_noise_m"]),
         ({"noise": {"no_such_noise": 1.0}}, ["body", "noise", "no_such_noise"]),
         ({"colour": "red"}, ["body", "colour"]),
@@ -222,6 +224,17 @@ def test_run_lifecycle_and_downloads(api: httpx.Client, tmp_path: Path) -> None:
     assert api.get(f"/api/runs/{run_id}").status_code == 404
     assert api.get(f"/api/runs/{run_id}/map.csv").status_code == 404
     assert api.delete(f"/api/runs/{run_id}").status_code == 404
+
+
+def test_a_run_can_walk_every_cell_as_the_paper_does(api: httpx.Client) -> None:
+    """By default a run ends once the map is done; ``end_when_mapped: false`` asks for the paper's full walk."""
+    body = {"world": "room1", "speed": "max", "seed": 0}
+    assert api.get("/api/config").json()["end_when_mapped"] is True
+    mapped = wait_ended(api, api.post("/api/runs", json=body).json()["id"])
+    walked = wait_ended(api, api.post("/api/runs", json={**body, "end_when_mapped": False}).json()["id"])
+    assert mapped["end_when_mapped"] is True and walked["end_when_mapped"] is False
+    assert mapped["terminated_by"] == walked["terminated_by"] == "complete"
+    assert walked["progress"]["step"] > 2 * mapped["progress"]["step"]
 
 
 def test_downloads_during_a_run_are_the_current_snapshot(api: httpx.Client) -> None:

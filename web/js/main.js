@@ -339,6 +339,7 @@ async function loadDefaults() {
   if (Number.isInteger(d.seed)) $('seed').value = String(d.seed);
   if (d.speed !== undefined && d.speed !== null) fillSpeedOptions($('speed'), d.speed);
   if (typeof d.time_limit_s === 'number') $('time-limit').placeholder = `default ${d.time_limit_s}`;
+  if (typeof d.end_when_mapped === 'boolean') $('full-walk').checked = !d.end_when_mapped;
   return d;
 }
 
@@ -355,6 +356,7 @@ $('start-form').addEventListener('submit', async (e) => {
   };
   const limit = $('time-limit').value.trim();
   if (limit) params.time_limit_s = Number(limit);
+  params.end_when_mapped = !$('full-walk').checked;
   const button = $('start-button');
   button.disabled = true;
   say('start-message', '');
