@@ -200,11 +200,17 @@ class SlamEngine:
             moved_ok=ok,
         )
 
+    def _settled(self, steps: int | None = None) -> bool:
+        """Whether runs end when mapped and the belief has not changed for ``steps`` steps (by
+        default ``settle_steps``): walking on through explored floor teaches the map nothing more."""
+        need = self.config.settle_steps if steps is None else steps
+        return self.config.end_when_mapped and self.stats.steps - self._last_change_step >= need
+
     def _mapped(self) -> bool:
-        """Whether the map is finished: nothing left to resolve in reach, no change of the belief for
-        ``settle_steps`` steps, and no occupied cell alone in free floor (a stray echo, which the
-        sweeps of the rest of the walk would clear, or a chair leg: then the walk goes on)."""
-        if not self.config.end_when_mapped or self.stats.steps - self._last_change_step < self.config.settle_steps:
+        """Whether the map is finished: nothing left to resolve in reach, the belief settled, and no
+        occupied cell alone in free floor (a stray echo, which the sweeps of the rest of the walk
+        would clear, or a chair leg: then the walk goes on)."""
+        if not self._settled():
             return False
         if self.explorer.frontier(self._belief, self._passable, self._doubtful()).any():
             return False
@@ -264,8 +270,9 @@ class SlamEngine:
         est = self.pose
         current = self.explorer.nav_cell_of(est.x, est.y)
         action: Action = self.explorer.decide(
-            current, est.theta, self._belief, self._passable, self._free_fraction, self._doubtful()
-        )
+            current, est.theta, self._belief, self._passable, self._free_fraction, self._doubtful(),
+            seek_frontier=self._settled(self.config.seek_frontier_steps),
+        )  # fmt: skip
         self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
         ok = True
         target_xy = None

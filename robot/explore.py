@@ -5,7 +5,8 @@ turning circle. A navigation cell is traversable when every map cell in it is be
 the depth-first search runs out, the explorer plans (breadth-first, over known traversable cells) to
 unvisited traversable cells, then to spots next to remaining frontier cells (unknown cells touching
 the reachable free area), which it inspects a bounded number of times before accepting them as
-blocked.
+blocked. When the map has settled while frontier cells remain (runs that end once mapped), it heads
+for the nearest unvisited cell next to them instead of walking on depth-first through explored floor.
 """
 
 from __future__ import annotations
@@ -156,11 +157,25 @@ class Explorer:
         passable: NDArray[np.bool_],
         free_fraction: NDArray[np.float64],
         doubtful: NDArray[np.bool_] | None = None,
+        seek_frontier: bool = False,
     ) -> Action:
-        """The next action from navigation cell ``current`` facing ``heading_rad``."""
+        """The next action from navigation cell ``current`` facing ``heading_rad``.
+
+        ``seek_frontier`` (the map has settled while unresolved cells remain): head for the nearest
+        unvisited cell next to the frontier instead of walking on depth-first through explored floor.
+        """
         self.visited[current] = True
         trav = self.traversable(free_fraction)
         trav[current] = True  # the robot is standing in it
+        if seek_frontier:
+            front = self.frontier(states, passable, doubtful)
+            if front.any():
+                # Cells not stood in yet first (a walk along the frontier sees more than a look from
+                # one spot), then a look from where the robot has been, as at the walk's end.
+                for spots_in in (trav & ~self.visited, self.visited):
+                    action, _ = self._search(current, trav, front, relaxed=False, seek_in=spots_in)
+                    if action is not None:
+                        return action
         first = direction_index(heading_rad)
         for k in range(8):
             d = CLOCKWISE[(first + k) % 8]
@@ -211,17 +226,25 @@ class Explorer:
         return bool(2 * sum(1 for cell in reached if self.visited[cell]) < np.count_nonzero(self.visited))
 
     def _search(
-        self, current: tuple[int, int], trav: NDArray[np.bool_], front: NDArray[np.bool_], relaxed: bool
+        self,
+        current: tuple[int, int],
+        trav: NDArray[np.bool_],
+        front: NDArray[np.bool_],
+        relaxed: bool,
+        seek_in: NDArray[np.bool_] | None = None,
     ) -> tuple[Action | None, Iterable[tuple[int, int]]]:
         """The first step towards the nearest goal (None when no goal is reachable), and the cells
-        the search reached."""
-        inspect_spots = self._inspection_spots(front)
-        stack_top = self.stack[-1] if self.stack else None
+        the search reached. The goals are unvisited cells, the top of the backtracking stack and
+        visited cells next to the frontier (to look from); with ``seek_in``, only the cells of
+        ``seek_in`` next to the frontier."""
+        seek = seek_in is not None
+        inspect_spots = self._inspection_spots(front, seek_in)
+        stack_top = None if seek else (self.stack[-1] if self.stack else None)
         parent: dict[tuple[int, int], tuple[int, int]] = {current: current}
         queue = deque([current])
         while queue:
             cell = queue.popleft()
-            goal_here = (cell != current and not self.visited[cell]) or cell == stack_top
+            goal_here = not seek and ((cell != current and not self.visited[cell]) or cell == stack_top)
             inspect_here = cell in inspect_spots
             if goal_here or (inspect_here and cell != current):
                 step = cell
@@ -243,15 +266,20 @@ class Explorer:
                     queue.append(nxt)
         return None, parent
 
-    def _inspection_spots(self, front: NDArray[np.bool_]) -> dict[tuple[int, int], tuple[int, int]]:
-        """Navigation cells next to a frontier map cell, mapped to that cell."""
+    def _inspection_spots(
+        self, front: NDArray[np.bool_], allowed: NDArray[np.bool_] | None = None
+    ) -> dict[tuple[int, int], tuple[int, int]]:
+        """Navigation cells next to a frontier map cell, mapped to that cell: the visited ones, or
+        those of ``allowed``."""
         spots: dict[tuple[int, int], tuple[int, int]] = {}
         b = self.block
+        if allowed is None:
+            allowed = self.visited
         for r, c in zip(*np.nonzero(front), strict=True):
             nav = (int(r) // b, int(c) // b)
             for d in ((0, 0), *CLOCKWISE):
                 spot = (nav[0] + d[0], nav[1] + d[1])
-                if 0 <= spot[0] < self.nav_rows and 0 <= spot[1] < self.nav_cols and self.visited[spot]:
+                if 0 <= spot[0] < self.nav_rows and 0 <= spot[1] < self.nav_cols and allowed[spot]:
                     spots.setdefault(spot, (int(r), int(c)))
         return spots
 

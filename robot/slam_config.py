@@ -40,6 +40,9 @@ class SlamConfig(BaseModel):
     # the depth-first visit of every navigation cell to its end first, as the paper's robot does.
     end_when_mapped: bool = True
     settle_steps: int = Field(default=40, ge=0)
+    # With end_when_mapped: once the map has not changed for this many steps while unresolved cells
+    # remain, head for them instead of walking on depth-first through explored floor.
+    seek_frontier_steps: int = Field(default=80, ge=1)
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()
