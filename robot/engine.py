@@ -200,17 +200,16 @@ class SlamEngine:
             moved_ok=ok,
         )
 
-    def _settled(self, steps: int | None = None) -> bool:
-        """Whether runs end when mapped and the belief has not changed for ``steps`` steps (by
-        default ``settle_steps``): walking on through explored floor teaches the map nothing more."""
-        need = self.config.settle_steps if steps is None else steps
-        return self.config.end_when_mapped and self.stats.steps - self._last_change_step >= need
+    def _settled(self, steps: int) -> bool:
+        """Whether runs end when mapped and the belief has not changed for ``steps`` steps: walking
+        on through explored floor teaches the map nothing more."""
+        return self.config.end_when_mapped and self.stats.steps - self._last_change_step >= steps
 
     def _mapped(self) -> bool:
         """Whether the map is finished: nothing left to resolve in reach, the belief settled, and no
         occupied cell alone in free floor (a stray echo, which the sweeps of the rest of the walk
         would clear, or a chair leg: then the walk goes on)."""
-        if not self._settled():
+        if not self._settled(self.config.settle_steps):
             return False
         if self.explorer.frontier(self._belief, self._passable, self._doubtful()).any():
             return False

@@ -6,7 +6,8 @@ the depth-first search runs out, the explorer plans (breadth-first, over known t
 unvisited traversable cells, then to spots next to remaining frontier cells (unknown cells touching
 the reachable free area), which it inspects a bounded number of times before accepting them as
 blocked. When the map has settled while frontier cells remain (runs that end once mapped), it heads
-for the nearest unvisited cell next to them instead of walking on depth-first through explored floor.
+for the nearest unvisited cell next to them, or else looks from the nearest visited one, instead of
+walking on depth-first through explored floor.
 """
 
 from __future__ import annotations
@@ -162,7 +163,8 @@ class Explorer:
         """The next action from navigation cell ``current`` facing ``heading_rad``.
 
         ``seek_frontier`` (the map has settled while unresolved cells remain): head for the nearest
-        unvisited cell next to the frontier instead of walking on depth-first through explored floor.
+        unvisited cell next to the frontier, or else look from the nearest visited one, instead of
+        walking on depth-first through explored floor.
         """
         self.visited[current] = True
         trav = self.traversable(free_fraction)
