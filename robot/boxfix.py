@@ -4,7 +4,8 @@ the robot's distance to that wall, which bounds dead-reckoning drift along that 
 Only used when the map size is known (the paper's setting). A reading counts when the beam points
 within a few degrees of an axis, the echo is short and strong, and the wall it implies lies within a
 few centimetres of the box edge; anything else (furniture against the wall, a glancing echo) is
-ignored.
+ignored. In a room that is not a rectangle its walls touch the box only at vertices, so a reading
+also needs the map to show the wall on the edge along a stretch, not one that comes close to it.
 """
 
 from __future__ import annotations
@@ -47,6 +48,15 @@ class BoxFixConfig(BaseModel):
     # corner on a box edge, echo arcs smear the corner along the edge over about the body's width,
     # and a bump into either wall, short of the edge, was taken for the box wall.
     contact_support_m: float = Field(default=0.5, ge=0.0)
+    # The map must show the wall on the edge along +-straight_window_m (clipped to the box), not a
+    # wall that comes close to it: in a room that is not a rectangle, a wall a few degrees off an
+    # axis meets the box edge at a vertex, and near it passes the footprint check a few centimetres
+    # inside the edge. Seen from the room, the first solid evidence may lie inner_band_m in from the
+    # edge (past the evidence cell at the edge) along at most max_inner_share of the stretch (a
+    # window of 0 turns this off).
+    straight_window_m: float = Field(default=0.6, ge=0.0)
+    inner_band_m: tuple[float, float] = (0.05, 0.15)
+    max_inner_share: float = Field(default=0.08, ge=0.0, le=1.0)
 
 
 def edge_supported(
@@ -87,6 +97,48 @@ def edge_supported(
     return bool(np.count_nonzero(np.any(solid, axis=1)) / along.size >= config.edge_support)
 
 
+def runs_along_edge(
+    evidence: Evidence,
+    hit: tuple[float, float],
+    horizontal: bool,
+    outward: float,
+    config: BoxFixConfig,
+    span: tuple[float, float],
+) -> bool:
+    """Whether the wall that the evidence shows through ``hit`` runs along the box edge over
+    +-``config.straight_window_m`` (clipped to ``span``, the edge's extent), rather than coming
+    close to it at one place (see ``BoxFixConfig``)."""
+    g = evidence.grid
+    f = g.resolution
+    along = np.arange(-config.straight_window_m, config.straight_window_m + 1e-9, f / 2)
+    at = hit[1] if horizontal else hit[0]
+    along = along[(at + along >= span[0]) & (at + along <= span[1])]
+    if along.size == 0:
+        return True
+    inner, deepest = config.inner_band_m
+    # Depth from the edge, negative inside the room, from a cell deeper than the inner band out to
+    # the edge band's outer side: two points per evidence cell, off the cells' edges (a box edge on
+    # one would leave a point on it in either cell, by rounding).
+    across = np.arange(-deepest - f + f / 4, config.edge_band_m[1], f / 2)
+    # The row of a point depends on its y alone and the column on its x: one conversion per line.
+    if horizontal:
+        _, cols = g.world_to_index(hit[0] + across * outward, np.full(across.size, hit[1]))
+        rows, _ = g.world_to_index(np.full(along.size, hit[0]), hit[1] + along)
+        rows, cols = rows[:, None], cols[None, :]
+    else:
+        _, cols = g.world_to_index(hit[0] + along, np.full(along.size, hit[1]))
+        rows, _ = g.world_to_index(np.full(across.size, hit[0]), hit[1] + across * outward)
+        rows, cols = rows[None, :], cols[:, None]
+    inside = g.contains_index(rows, cols)
+    solid = inside & (
+        evidence.logodds[np.clip(rows, 0, g.rows - 1), np.clip(cols, 0, g.cols - 1)] >= config.occupied_logodds
+    )
+    seen = np.any(solid, axis=1)
+    face = np.where(seen, across[np.argmax(solid, axis=1)], np.nan)  # first solid seen from the room
+    within = int(np.count_nonzero((face < -inner) & (face >= -deepest)))
+    return within <= config.max_inner_share * along.size
+
+
 def _median(values: list[float]) -> float:
     """np.median of a short list (the middle value, or the mean of the two middle ones) without its
     overhead: the same arithmetic."""
@@ -113,7 +165,8 @@ def box_offsets(
     in one sweep (the median over the beams that count), or None for an axis no beam measured.
 
     With ``evidence`` (the map so far), a reading counts only where the map already shows the box
-    edge as a wall across the beam's footprint.
+    edge as a wall across the beam's footprint, and on the edge along a longer stretch, not only
+    where a wall comes close to it.
     """
     if frame.extent is None or not config.enabled:
         return None, None
@@ -144,6 +197,11 @@ def box_offsets(
                 hit = (edge, beam.y) if horizontal else (beam.x, edge)
                 outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
                 if not edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
+                    continue
+                span = (min_y, max_y) if horizontal else (min_x, max_x)
+                if config.straight_window_m > 0.0 and not runs_along_edge(
+                    evidence, hit, horizontal, outward, config, span
+                ):
                     continue
             (dxs if horizontal else dys).append(offset)
     return (_median(dxs) if dxs else None), (_median(dys) if dys else None)

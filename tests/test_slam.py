@@ -678,6 +678,31 @@ def test_box_fixes_need_the_map_to_show_the_box_edge_as_a_wall() -> None:
     assert _box_fix(frame, ROBOT, believed, ranges, config, empty) == (0.0, 0.0)
 
 
+def test_box_fixes_ignore_a_wall_that_slants_into_the_box_edge() -> None:
+    """In a room that is not a rectangle a wall a few degrees off an axis can meet the box edge at a
+    vertex: near there it passes within the gate of the edge, solid across the beam's footprint,
+    but over a longer stretch it slants away from the edge, and its echoes must not count."""
+    from robot.boxfix import BoxFixConfig
+
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    ranges = np.full(8, ROBOT.sonar.max_range_m)
+    ranges[0] = 2.0 - 0.03 - 1.0 - ROBOT.sonars[0].offset_x_m  # the face 3 cm inside the edge
+    believed = Pose(1.0, 1.0, 0.0)
+    config = BoxFixConfig(gain=1.0)
+    ys = np.arange(0.0, 2.0, 0.025)
+    # Solid evidence 2 cm behind each face: a straight wall 3 cm inside the edge, and a wall at 6
+    # degrees to it, meeting the edge at y = 1.3.
+    along = _evidence_with_solid(frame, [(1.99, float(y)) for y in ys])
+    slant = math.tan(math.radians(6.0))
+    slanting = _evidence_with_solid(frame, [(2.0 - slant * (1.3 - float(y)) + 0.02, float(y)) for y in ys if y <= 1.3])
+    assert _box_fix(frame, ROBOT, believed, ranges, config, along)[0] == pytest.approx(0.03, abs=1e-9)
+    assert _box_fix(frame, ROBOT, believed, ranges, config, slanting) == (0.0, 0.0)
+    # Without the check along the edge, the slanting wall passes the test across the footprint.
+    unchecked = config.model_copy(update={"straight_window_m": 0.0})
+    assert _box_fix(frame, ROBOT, believed, ranges, unchecked, slanting)[0] == pytest.approx(0.03, abs=1e-9)
+
+
 def test_an_occupied_cell_between_the_explored_area_and_unknown_space_gets_a_closer_look() -> None:
     grid = GridSpec(0.0, 0.0, 0.2, 5, 5)
     explorer = Explorer(grid, 1, (4, 2))
