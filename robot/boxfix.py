@@ -48,15 +48,51 @@ class BoxFixConfig(BaseModel):
     # corner on a box edge, echo arcs smear the corner along the edge over about the body's width,
     # and a bump into either wall, short of the edge, was taken for the box wall.
     contact_support_m: float = Field(default=0.5, ge=0.0)
-    # The map must show the wall on the edge along +-straight_window_m (clipped to the box), not a
+    # The map must show the wall on the edge along +-along_window_m (clipped to the box), not a
     # wall that comes close to it: in a room that is not a rectangle, a wall a few degrees off an
     # axis meets the box edge at a vertex, and near it passes the footprint check a few centimetres
     # inside the edge. Seen from the room, the first solid evidence may lie inner_band_m in from the
     # edge (past the evidence cell at the edge) along at most max_inner_share of the stretch (a
     # window of 0 turns this off).
-    straight_window_m: float = Field(default=0.6, ge=0.0)
+    along_window_m: float = Field(default=0.6, ge=0.0)
     inner_band_m: tuple[float, float] = (0.05, 0.15)
     max_inner_share: float = Field(default=0.08, ge=0.0, le=1.0)
+
+
+def _solid_near_edge(
+    evidence: Evidence,
+    hit: tuple[float, float],
+    horizontal: bool,
+    along: NDArray[np.float64],
+    across: NDArray[np.float64],
+    config: BoxFixConfig,
+) -> NDArray[np.bool_]:
+    """Whether the evidence is solid at each point of a grid laid on the box edge through ``hit``:
+    ``along`` the edge and ``across`` it (+x or +y) [m], offsets from ``hit``, (along, across).
+
+    ``horizontal``: the beam runs along x (the edge is a vertical line). The row of a point depends
+    on its y alone and the column on its x, so each is converted once per line of points."""
+    g = evidence.grid
+    if horizontal:
+        _, cols = g.world_to_index(hit[0] + across, np.full(across.size, hit[1]))
+        rows, _ = g.world_to_index(np.full(along.size, hit[0]), hit[1] + along)
+        rows, cols = rows[:, None], cols[None, :]
+    else:
+        _, cols = g.world_to_index(hit[0] + along, np.full(along.size, hit[1]))
+        rows, _ = g.world_to_index(np.full(across.size, hit[0]), hit[1] + across)
+        rows, cols = rows[None, :], cols[:, None]
+    inside = g.contains_index(rows, cols)
+    return inside & (
+        evidence.logodds[np.clip(rows, 0, g.rows - 1), np.clip(cols, 0, g.cols - 1)] >= config.occupied_logodds
+    )
+
+
+def _on_edge(
+    along: NDArray[np.float64], hit: tuple[float, float], horizontal: bool, span: tuple[float, float]
+) -> NDArray[np.float64]:
+    """The offsets of ``along`` that stay on the edge's own extent ``span``."""
+    at = hit[1] if horizontal else hit[0]
+    return along[(at + along >= span[0]) & (at + along <= span[1])]
 
 
 def edge_supported(
@@ -74,26 +110,14 @@ def edge_supported(
     ``horizontal``: the beam runs along x (the edge is a vertical line); ``outward``: +1 or -1, the
     direction out of the box along the beam.
     """
-    g = evidence.grid
-    f = g.resolution
+    f = evidence.grid.resolution
     along = np.arange(-half_width, half_width + 1e-9, f)
     if span is not None:
-        at = hit[1] if horizontal else hit[0]
-        along = along[(at + along >= span[0]) & (at + along <= span[1])]
+        along = _on_edge(along, hit, horizontal, span)
         if along.size == 0:
             return False
     across = np.arange(-config.edge_band_m[0], config.edge_band_m[1] + 1e-9, f / 2) * outward
-    # Points (along, across) on a grid: the row of a point depends on its y alone and the column on
-    # its x, so each is converted once per line of points (GridSpec.world_to_index, broadcast).
-    if horizontal:
-        xs, ys = hit[0] + across[None, :], hit[1] + along[:, None]
-    else:
-        xs, ys = hit[0] + along[:, None], hit[1] + across[None, :]
-    rows, cols = g.world_to_index(xs, ys)
-    inside = g.contains_index(rows, cols)
-    solid = inside & (
-        evidence.logodds[np.clip(rows, 0, g.rows - 1), np.clip(cols, 0, g.cols - 1)] >= config.occupied_logodds
-    )
+    solid = _solid_near_edge(evidence, hit, horizontal, along, across, config)
     return bool(np.count_nonzero(np.any(solid, axis=1)) / along.size >= config.edge_support)
 
 
@@ -106,13 +130,10 @@ def runs_along_edge(
     span: tuple[float, float],
 ) -> bool:
     """Whether the wall that the evidence shows through ``hit`` runs along the box edge over
-    +-``config.straight_window_m`` (clipped to ``span``, the edge's extent), rather than coming
-    close to it at one place (see ``BoxFixConfig``)."""
-    g = evidence.grid
-    f = g.resolution
-    along = np.arange(-config.straight_window_m, config.straight_window_m + 1e-9, f / 2)
-    at = hit[1] if horizontal else hit[0]
-    along = along[(at + along >= span[0]) & (at + along <= span[1])]
+    +-``config.along_window_m`` (clipped to ``span``, the edge's extent), rather than coming close
+    to it at one place (see ``BoxFixConfig``)."""
+    f = evidence.grid.resolution
+    along = _on_edge(np.arange(-config.along_window_m, config.along_window_m + 1e-9, f / 2), hit, horizontal, span)
     if along.size == 0:
         return True
     inner, deepest = config.inner_band_m
@@ -120,19 +141,7 @@ def runs_along_edge(
     # the edge band's outer side: two points per evidence cell, off the cells' edges (a box edge on
     # one would leave a point on it in either cell, by rounding).
     across = np.arange(-deepest - f + f / 4, config.edge_band_m[1], f / 2)
-    # The row of a point depends on its y alone and the column on its x: one conversion per line.
-    if horizontal:
-        _, cols = g.world_to_index(hit[0] + across * outward, np.full(across.size, hit[1]))
-        rows, _ = g.world_to_index(np.full(along.size, hit[0]), hit[1] + along)
-        rows, cols = rows[:, None], cols[None, :]
-    else:
-        _, cols = g.world_to_index(hit[0] + along, np.full(along.size, hit[1]))
-        rows, _ = g.world_to_index(np.full(across.size, hit[0]), hit[1] + across * outward)
-        rows, cols = rows[None, :], cols[:, None]
-    inside = g.contains_index(rows, cols)
-    solid = inside & (
-        evidence.logodds[np.clip(rows, 0, g.rows - 1), np.clip(cols, 0, g.cols - 1)] >= config.occupied_logodds
-    )
+    solid = _solid_near_edge(evidence, hit, horizontal, along, across * outward, config)
     seen = np.any(solid, axis=1)
     face = np.where(seen, across[np.argmax(solid, axis=1)], np.nan)  # first solid seen from the room
     within = int(np.count_nonzero((face < -inner) & (face >= -deepest)))
@@ -199,7 +208,7 @@ def box_offsets(
                 if not edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
                     continue
                 span = (min_y, max_y) if horizontal else (min_x, max_x)
-                if config.straight_window_m > 0.0 and not runs_along_edge(
+                if config.along_window_m > 0.0 and not runs_along_edge(
                     evidence, hit, horizontal, outward, config, span
                 ):
                     continue

@@ -699,7 +699,7 @@ def test_box_fixes_ignore_a_wall_that_slants_into_the_box_edge() -> None:
     assert _box_fix(frame, ROBOT, believed, ranges, config, along)[0] == pytest.approx(0.03, abs=1e-9)
     assert _box_fix(frame, ROBOT, believed, ranges, config, slanting) == (0.0, 0.0)
     # Without the check along the edge, the slanting wall passes the test across the footprint.
-    unchecked = config.model_copy(update={"straight_window_m": 0.0})
+    unchecked = config.model_copy(update={"along_window_m": 0.0})
     assert _box_fix(frame, ROBOT, believed, ranges, unchecked, slanting)[0] == pytest.approx(0.03, abs=1e-9)
 
 
