@@ -6,6 +6,13 @@ within a few degrees of an axis, the echo is short and strong, and the wall it i
 few centimetres of the box edge; anything else (furniture against the wall, a glancing echo) is
 ignored. In a room that is not a rectangle its walls touch the box only at vertices, so a reading
 also needs the map to show the wall on the edge along a stretch, not one that comes close to it.
+
+Drift grows with the distance driven, and once it has passed a fixed gate the fixes would stop for
+good (in a large hall the heading drifts during long crossings of open floor). ``DriftGate`` widens
+the gate with the distance driven since an axis's last fix; a reading past the fixed gate counts
+only when the edge's last such readings, taken along a stretch of it, agree on one offset, as a
+drifted estimate makes them, and not on offsets that change along the edge, as an angled wall near
+the edge does.
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from robot.config import RobotConfig
 from robot.mapping.base import Evidence, MapFrame
@@ -32,6 +39,16 @@ class BoxFixConfig(BaseModel):
     # box edge, and a loose gate let such echoes drag the estimate (hexagon: 27 cm of error at 12 cm).
     gate_m: float = Field(default=0.05, gt=0.0)  # the implied wall must be this close to the box edge
     gain: float = Field(default=0.3, gt=0.0, le=1.0)  # share of the offset corrected per sweep
+    # The gate grows by gate_growth per metre driven since the axis's last fix, up to max_gate_m
+    # (see DriftGate; a growth of 0 keeps the gate fixed) ...
+    gate_growth: float = Field(default=0.02, ge=0.0)
+    max_gate_m: float = Field(default=0.15, gt=0.0)
+    # ... and a reading past gate_m counts only when the edge's last wide_readings such readings span
+    # wide_span_m along it and lie on a line within wide_rms_m whose slope is at most wide_max_slope.
+    wide_readings: int = Field(default=6, ge=3)
+    wide_span_m: float = Field(default=0.6, ge=0.0)
+    wide_rms_m: float = Field(default=0.02, ge=0.0)
+    wide_max_slope: float = Field(default=0.03, ge=0.0)
     # The map so far must show the box edge itself as a wall across most of the beam's footprint:
     # in a room that is not a rectangle a corner or an angled wall may touch the box edge at one
     # point, and echoes from near that point would drag the estimate.
@@ -57,6 +74,12 @@ class BoxFixConfig(BaseModel):
     along_window_m: float = Field(default=0.6, ge=0.0)
     inner_band_m: tuple[float, float] = (0.05, 0.15)
     max_inner_share: float = Field(default=0.08, ge=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _gates(self) -> BoxFixConfig:
+        if self.max_gate_m < self.gate_m:
+            raise ValueError("max_gate_m must be at least gate_m")
+        return self
 
 
 def _solid_near_edge(
@@ -148,6 +171,61 @@ def runs_along_edge(
     return within <= config.max_inner_share * along.size
 
 
+_SPARE_M = 0.02  # what a fix past the fixed gate leaves to later sweeps, plus this, stays in the gate
+
+
+class DriftGate:
+    """How far from a box edge a reading may put the wall, as drift grows with the distance driven:
+    the fixed gate plus ``gate_growth`` per metre driven since the axis's last fix, up to
+    ``max_gate_m``. Past the fixed gate a reading counts only when the edge's last few such readings,
+    taken along a stretch of it, agree on one offset (see the module's docstring)."""
+
+    def __init__(self, config: BoxFixConfig) -> None:
+        self.config = config
+        self.travel = [0.0, 0.0]  # metres driven since the last fix along x and along y
+        self._at: tuple[float, float] | None = None
+        self._wide: list[list[tuple[float, float]]] = [[], [], [], []]  # (along, offset) per edge
+
+    def follow(self, x: float, y: float, drove: bool = True) -> None:
+        """The estimate is now at (x, y): driven there, or moved there by a fix (``drove`` False)."""
+        if drove and self._at is not None:
+            step = math.hypot(x - self._at[0], y - self._at[1])
+            self.travel = [t + step for t in self.travel]
+        self._at = (x, y)
+
+    def limit(self, axis: int) -> float:
+        """The gate for readings along ``axis`` (0: x, 1: y) [m]."""
+        c = self.config
+        return min(c.max_gate_m, c.gate_m + c.gate_growth * self.travel[axis])
+
+    def fixed(self, axis: int, remaining_m: float) -> None:
+        """A fix along ``axis`` that leaves ``remaining_m`` of its offset to later sweeps: the gate
+        stays wide enough for that, with 2 cm to spare, so that a fix past the fixed gate can finish
+        its correction."""
+        c = self.config
+        need = abs(remaining_m) + _SPARE_M - c.gate_m
+        self.travel[axis] = max(0.0, need) / c.gate_growth if c.gate_growth > 0.0 else 0.0
+
+    def admits(self, edge: int, along_m: float, offset: float) -> bool:
+        """Whether a reading of ``edge`` (0-3: max x, min x, max y, min y) at ``along_m`` along it,
+        within ``limit`` and passing the map's checks, counts."""
+        c = self.config
+        kept = self._wide[edge]
+        if abs(offset) <= c.gate_m:
+            kept.clear()
+            return True
+        kept.append((along_m, offset))
+        del kept[: -c.wide_readings]
+        if len(kept) < c.wide_readings:
+            return False
+        at = np.array(kept)
+        if np.ptp(at[:, 0]) < c.wide_span_m:
+            return False
+        slope, intercept = np.polyfit(at[:, 0], at[:, 1], 1)
+        rms = float(np.sqrt(np.mean((at[:, 1] - (slope * at[:, 0] + intercept)) ** 2)))
+        return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
+
+
 def _median(values: list[float]) -> float:
     """np.median of a short list (the middle value, or the mean of the two middle ones) without its
     overhead: the same arithmetic."""
@@ -169,13 +247,15 @@ def box_offsets(
     ranges_m: NDArray[np.float64],
     config: BoxFixConfig,
     evidence: Evidence | None = None,
+    gate: DriftGate | None = None,
 ) -> tuple[float | None, float | None]:
     """The position error (true minus estimated) [m] along x and along y that the box's walls show
     in one sweep (the median over the beams that count), or None for an axis no beam measured.
 
     With ``evidence`` (the map so far), a reading counts only where the map already shows the box
     edge as a wall across the beam's footprint, and on the edge along a longer stretch, not only
-    where a wall comes close to it.
+    where a wall comes close to it. With ``gate``, the gate grows with the distance driven (see
+    ``DriftGate``); without it, it is ``config.gate_m``.
     """
     if frame.extent is None or not config.enabled:
         return None, None
@@ -188,11 +268,8 @@ def box_offsets(
         if not beam.echo or beam.range_m > config.max_range_m:
             continue
         axis = math.remainder(beam.axis_rad, 2 * math.pi)
-        for target, horizontal, edge in (
-            (0.0, True, max_x),
-            (math.pi, True, min_x),
-            (math.pi / 2, False, max_y),
-            (-math.pi / 2, False, min_y),
+        for index, (target, horizontal, edge) in enumerate(
+            ((0.0, True, max_x), (math.pi, True, min_x), (math.pi / 2, False, max_y), (-math.pi / 2, False, min_y))
         ):
             if abs(math.remainder(axis - target, 2 * math.pi)) > tol:
                 continue
@@ -200,7 +277,7 @@ def box_offsets(
                 offset = edge - (beam.x + beam.range_m * math.cos(axis))
             else:
                 offset = edge - (beam.y + beam.range_m * math.sin(axis))
-            if abs(offset) > config.gate_m:
+            if abs(offset) > (config.gate_m if gate is None else gate.limit(0 if horizontal else 1)):
                 continue
             if evidence is not None:
                 hit = (edge, beam.y) if horizontal else (beam.x, edge)
@@ -212,5 +289,7 @@ def box_offsets(
                     evidence, hit, horizontal, outward, config, span
                 ):
                     continue
+            if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset):
+                continue
             (dxs if horizontal else dys).append(offset)
     return (_median(dxs) if dxs else None), (_median(dys) if dys else None)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, box_offsets, box_shift, edge_supported
+from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, box_shift, edge_supported
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
@@ -150,12 +150,17 @@ class WallFixes:
         self.heading = WallHeading(heading) if heading.enabled and box.enabled and frame.extent is not None else None
         self.heading_fixes: list[HeadingFit] = []
         self.contact_fixes = 0
+        self.gate = DriftGate(box)
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
         """The pose after this sweep's fixes (``pose`` itself when there are none)."""
-        ox, oy = box_offsets(self.frame, self.robot, pose, ranges_m, self.box, evidence)
+        self.gate.follow(pose.x, pose.y)
+        ox, oy = box_offsets(self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate)
         if ox is None and oy is None:
             return pose
+        for axis, offset in enumerate((ox, oy)):
+            if offset is not None:
+                self.gate.fixed(axis, offset * (1.0 - self.box.gain))
         if self.heading is not None:
             odo_x, odo_y = dr.odometry_xy
             if ox is not None:
@@ -163,6 +168,7 @@ class WallFixes:
             if oy is not None:
                 self.heading.add(1, oy + pose.y - odo_y, odo_x, odo_y)
         est = dr.shift_position(*box_shift(self.box, (ox, oy)))
+        self.gate.follow(est.x, est.y, drove=False)
         if self.heading is not None and (fit := self.heading.fit()) is not None:
             est = dr.correct_heading(fit.delta_rad, fit.std_rad)
             self.heading.reset()
@@ -201,5 +207,7 @@ class WallFixes:
             return pose, True
         _, axis, offset = best
         est = dr.shift_position(offset if axis == 0 else 0.0, offset if axis == 1 else 0.0)
+        self.gate.fixed(axis, 0.0)
+        self.gate.follow(est.x, est.y, drove=False)
         self.contact_fixes += 1
         return est.as_pose(), False

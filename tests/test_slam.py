@@ -649,8 +649,9 @@ def _position_error_p90(result: RunResult) -> float:
 def _evidence_with_solid(frame: MapFrame, solid_xy: list[tuple[float, float]]):
     from robot.mapping.base import Evidence
 
-    side = round((frame.grid.cols * frame.grid.resolution + 0.6) / 0.05)
-    fine = GridSpec(frame.grid.origin_x - 0.3, frame.grid.origin_y - 0.3, 0.05, side, side)
+    g = frame.grid
+    rows, cols = (round((n * g.resolution + 0.6) / 0.05) for n in (g.rows, g.cols))
+    fine = GridSpec(g.origin_x - 0.3, g.origin_y - 0.3, 0.05, rows, cols)
     logodds = np.zeros(fine.shape, dtype=np.float32)
     for x, y in solid_xy:
         r, c = fine.world_to_index(x, y)
@@ -701,6 +702,78 @@ def test_box_fixes_ignore_a_wall_that_slants_into_the_box_edge() -> None:
     # Without the check along the edge, the slanting wall passes the test across the footprint.
     unchecked = config.model_copy(update={"along_window_m": 0.0})
     assert _box_fix(frame, ROBOT, believed, ranges, unchecked, slanting)[0] == pytest.approx(0.03, abs=1e-9)
+
+
+def test_the_box_fix_gate_grows_with_the_distance_driven_since_the_last_fix() -> None:
+    from robot.boxfix import BoxFixConfig, DriftGate
+
+    gate = DriftGate(BoxFixConfig(gate_m=0.05, gate_growth=0.02, max_gate_m=0.15, gain=0.3))
+    gate.follow(0.0, 0.0)
+    gate.follow(3.0, 4.0)  # 5 m driven
+    assert gate.limit(0) == pytest.approx(0.15) and gate.limit(1) == pytest.approx(0.15)
+    gate.follow(9.0, 9.0, drove=False)  # moved by a fix, not driven
+    assert gate.travel == pytest.approx([5.0, 5.0])
+    gate.fixed(0, 0.07)  # a fix along x leaves 7 cm for later sweeps: the gate stays open for them
+    assert gate.limit(0) == pytest.approx(0.09) and gate.limit(1) == pytest.approx(0.15)
+    gate.fixed(1, 0.01)
+    assert gate.limit(1) == pytest.approx(0.05)
+    fixed = DriftGate(BoxFixConfig(gate_growth=0.0))
+    fixed.follow(0.0, 0.0)
+    fixed.follow(10.0, 0.0)
+    assert fixed.limit(0) == pytest.approx(0.05)
+    with pytest.raises(ValueError, match="max_gate_m must be at least gate_m"):
+        BoxFixConfig(gate_m=0.05, max_gate_m=0.04)
+
+
+def test_a_drifted_estimate_is_fixed_again_once_readings_along_the_wall_agree() -> None:
+    """Once the estimate has drifted past the fixed gate, the fixes stop; the gate grows with the
+    distance driven, and a reading past the fixed gate counts once the last few along the wall put
+    it at the same offset. An angled wall near the box edge puts it at offsets that change along the
+    edge, and never counts."""
+    from robot.boxfix import BoxFixConfig
+    from robot.headingfix import HeadingFixConfig, WallFixes
+
+    grid = GridSpec(0.0, 0.0, 0.2, 20, 10)  # 2 m east-west, 4 m north-south
+    frame = MapFrame(grid=grid, start=Pose(1.5, 0.2, 0.0), extent=(0.0, 0.0, 2.0, 4.0))
+    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in np.arange(0.025, 4.0, 0.05)])
+    rng = np.random.default_rng(3)
+
+    def drive(
+        config: BoxFixConfig, x: float, face_offset: float, slope: float = 0.0, driven: float = 0.0
+    ) -> list[float]:
+        """Sweeps every 20 cm (a cell) north along the east wall from the estimate ``x`` (the truth is at
+        1.5) after ``driven`` metres without a fix, the face that the echoes show ``face_offset``
+        inside the edge at first and ``slope`` m per m closer to it further on: the estimate's x
+        after each sweep."""
+        fixes = WallFixes(frame, ROBOT, config, HeadingFixConfig(enabled=False))
+        fixes.gate.follow(x, 0.1 - driven)
+        xs = []
+        for y in np.arange(0.1, 4.0, 0.2):
+            believed = Pose(x, float(y), 0.0)
+            dr = DeadReckoning(ROBOT, believed)
+            ranges = np.full(8, ROBOT.sonar.max_range_m)
+            face = 2.0 - face_offset + slope * (float(y) - 0.1)
+            ranges[0] = face - 1.5 - ROBOT.sonars[0].offset_x_m + rng.normal(0.0, 0.005)
+            fixes.apply(dr, believed, ranges, wall)
+            x = dr.estimate.x
+            xs.append(x)
+        return xs
+
+    # The estimate 8 cm west of the truth: no fix until the gate has grown past 8 cm (1.5 m driven)
+    # and six readings agree; then the fixes bring the estimate back to the truth.
+    xs = drive(BoxFixConfig(), 1.42, 0.0)
+    first = next(i for i, x in enumerate(xs) if x != 1.42)
+    assert 12 <= first <= 15
+    assert abs(xs[-1] - 1.5) < 0.015
+    assert all(x == 1.42 for x in drive(BoxFixConfig(gate_growth=0.0), 1.42, 0.0))  # a fixed gate: never again
+    # The estimate right, after 5 m without a fix: an angled wall 14 cm inside the edge, 1 cm closer
+    # every 20 cm, puts the wall at offsets that change along the edge, and never counts (until
+    # it is within the fixed gate, at y = 1.9) ...
+    xs = drive(BoxFixConfig(), 1.5, 0.14, 0.05, driven=5.0)
+    assert all(x == 1.5 for x in xs[:9])
+    # ... as it would without the test on the readings' line.
+    xs = drive(BoxFixConfig(wide_max_slope=1.0, wide_rms_m=1.0), 1.5, 0.14, 0.05, driven=5.0)
+    assert any(x != 1.5 for x in xs[:9])
 
 
 def test_an_occupied_cell_between_the_explored_area_and_unknown_space_gets_a_closer_look() -> None:
