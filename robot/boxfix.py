@@ -49,6 +49,10 @@ class BoxFixConfig(BaseModel):
     wide_span_m: float = Field(default=0.6, ge=0.0)
     wide_rms_m: float = Field(default=0.02, ge=0.0)
     wide_max_slope: float = Field(default=0.03, ge=0.0)
+    # Such a fix corrects its whole offset at once, and the map is rebuilt with the drift spread over
+    # the distance driven since the axis's last fix (robot.mapping.journal); false: it corrects by
+    # ``gain`` per sweep like any other, and the map keeps what was marked while the estimate was off.
+    drift_repair: bool = True
     # The map so far must show the box edge itself as a wall across most of the beam's footprint:
     # in a room that is not a rectangle a corner or an angled wall may touch the box edge at one
     # point, and echoes from near that point would drag the estimate.

@@ -18,10 +18,11 @@ from robot.config import RobotConfig
 from robot.explore import Action, Explorer
 from robot.grid import OCCUPIED, UNKNOWN, lone_occupied
 from robot.hardware import Hardware
-from robot.headingfix import WallFixes
+from robot.headingfix import WallFixes, repairs_possible
 from robot.localization import DeadReckoning, PoseEstimate
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame, blocked_by_extent
+from robot.mapping.journal import JournaledMapper
 from robot.motion import Pilot
 from robot.sensorlog import SensorLogWriter
 from robot.slam_config import SlamConfig
@@ -87,8 +88,12 @@ class SlamEngine:
         self.robot = robot
         self.config = config
         self.frame = frame
-        self.mapper = make_mapper(config.mapper, frame, robot, config)
         self.dead_reckoning = DeadReckoning(robot, frame.start, config.localization)
+        self.mapper = JournaledMapper(
+            lambda: make_mapper(config.mapper, frame, robot, config),
+            lambda: self.dead_reckoning.distance_m,
+            keep=repairs_possible(frame, config.box_fix),
+        )
         self.fixes = WallFixes(frame, robot, config.box_fix, config.heading_fix)
         self._user_tick = on_tick
         self._last_body_xy = (frame.start.x, frame.start.y)
@@ -134,6 +139,7 @@ class SlamEngine:
         if self.recorder is not None:
             self.recorder.sweep(sweep)
         pose = self.fixes.apply(self.dead_reckoning, est.as_pose(), sweep.ranges_m, self.mapper.evidence())
+        self.mapper.repair(self.fixes.take_repairs())
         self.mapper.integrate(pose, sweep.ranges_m)
         self.mapper.mark_body(pose)
         self.last_sweep = sweep.ranges_m

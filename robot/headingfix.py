@@ -27,10 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, box_shift, edge_supported
+from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, edge_supported
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
+from robot.mapping.journal import Repair
 from robot.world import Pose
 
 
@@ -139,6 +140,11 @@ class WallHeading:
         return cov @ a.T @ b, cov
 
 
+def repairs_possible(frame: MapFrame, box: BoxFixConfig) -> bool:
+    """Whether ``WallFixes`` can ask for the map to be repaired (see ``BoxFixConfig.drift_repair``)."""
+    return frame.extent is not None and box.enabled and box.drift_repair and box.gate_growth > 0.0
+
+
 class WallFixes:
     """Position and heading fixes from one sweep's echoes off the room box, applied to the dead
     reckoning; the engine and the replay of a log call it alike."""
@@ -151,6 +157,8 @@ class WallFixes:
         self.heading_fixes: list[HeadingFit] = []
         self.contact_fixes = 0
         self.gate = DriftGate(box)
+        self._fixed_at = [0.0, 0.0]  # the odometer at each axis's last fix within the fixed gate [m]
+        self._repairs: list[Repair] = []
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
         """The pose after this sweep's fixes (``pose`` itself when there are none)."""
@@ -158,22 +166,41 @@ class WallFixes:
         ox, oy = box_offsets(self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate)
         if ox is None and oy is None:
             return pose
+        shift = [0.0, 0.0]
         for axis, offset in enumerate((ox, oy)):
-            if offset is not None:
-                self.gate.fixed(axis, offset * (1.0 - self.box.gain))
+            if offset is None:
+                continue
+            if abs(offset) <= self.box.gate_m:
+                self._fixed_at[axis] = dr.distance_m
+            elif self.box.drift_repair:
+                # Readings along the wall agree that the estimate has drifted: correct it at once,
+                # and the map with it.
+                self._repairs.append(Repair(axis, offset, self._fixed_at[axis], dr.distance_m))
+                self._fixed_at[axis] = dr.distance_m
+                shift[axis] = offset
+                self.gate.fixed(axis, 0.0)
+                continue
+            shift[axis] = self.box.gain * offset
+            self.gate.fixed(axis, offset * (1.0 - self.box.gain))
         if self.heading is not None:
             odo_x, odo_y = dr.odometry_xy
             if ox is not None:
                 self.heading.add(0, ox + pose.x - odo_x, odo_x, odo_y)
             if oy is not None:
                 self.heading.add(1, oy + pose.y - odo_y, odo_x, odo_y)
-        est = dr.shift_position(*box_shift(self.box, (ox, oy)))
+        est = dr.shift_position(shift[0], shift[1])
         self.gate.follow(est.x, est.y, drove=False)
         if self.heading is not None and (fit := self.heading.fit()) is not None:
             est = dr.correct_heading(fit.delta_rad, fit.std_rad)
             self.heading.reset()
             self.heading_fixes.append(fit)
         return est.as_pose()
+
+    def take_repairs(self) -> list[Repair]:
+        """The corrections that the map needs after the last sweep's fixes, once (see
+        ``BoxFixConfig.drift_repair``)."""
+        repairs, self._repairs = self._repairs, []
+        return repairs
 
     def contact(
         self, dr: DeadReckoning, pose: Pose, direction_rad: float, evidence: Evidence | None
@@ -208,6 +235,7 @@ class WallFixes:
         _, axis, offset = best
         est = dr.shift_position(offset if axis == 0 else 0.0, offset if axis == 1 else 0.0)
         self.gate.fixed(axis, 0.0)
+        self._fixed_at[axis] = dr.distance_m
         self.gate.follow(est.x, est.y, drove=False)
         self.contact_fixes += 1
         return est.as_pose(), False

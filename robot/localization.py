@@ -97,6 +97,7 @@ class DeadReckoning:
         # Encoder yaw-rate quantisation: each wheel's count is off by up to one count.
         self._enc_yaw_quantum = robot.metres_per_count / robot.wheel_base_m  # [rad]
         self.slip_events = 0
+        self.distance_m = 0.0  # driven, by the encoders (turns on the spot add nothing)
         # The same numbers every tick, worked out once.
         self._metres_per_count = robot.metres_per_count
         self._yaw_jump_var = cfg.yaw_rate_jump_std_rad_s**2  # [(rad/s)^2]
@@ -142,9 +143,7 @@ class DeadReckoning:
         self._last_counts = (counts.left, counts.right)
         self._last_t = counts.t_s
 
-    def update(
-        self, counts: EncoderCounts, imu: Sequence[ImuSample], wheels_commanded: bool = False
-    ) -> PoseEstimate:
+    def update(self, counts: EncoderCounts, imu: Sequence[ImuSample], wheels_commanded: bool = False) -> PoseEstimate:
         """Advance the estimate to ``counts.t_s`` with the IMU samples taken since the last update.
 
         ``wheels_commanded`` says whether the wheels were driven during the interval: at low speed a
@@ -205,6 +204,7 @@ class DeadReckoning:
             kf.update(np.array([enc_rate]), R=np.array([[enc_var]]), H=kf.H[1:2])
         # Position: encoder distance along the mid-tick fused heading.
         ds = (dl + dr) / 2.0
+        self.distance_m += abs(ds)
         theta_mid = 0.5 * (theta_before + float(kf.x[0]))
         step_x, step_y = ds * math.cos(theta_mid), ds * math.sin(theta_mid)
         self._x += step_x

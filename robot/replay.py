@@ -26,11 +26,12 @@ from robot.engine import classify
 from robot.errors import ConfigError, LogFormatError
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, cells_to_cover
 from robot.hardware import EncoderCounts, ImuSample
-from robot.headingfix import WallFixes
+from robot.headingfix import WallFixes, repairs_possible
 from robot.localization import DeadReckoning
 from robot.mapio import atomic_write_bytes, write_map_files
 from robot.mapping import Mapper, make_mapper
 from robot.mapping.base import MapFrame
+from robot.mapping.journal import JournaledMapper
 from robot.sensorlog import read_sensor_log
 from robot.settings import load_run_config
 from robot.slam_config import SlamConfig, slam_config_from_dict
@@ -195,11 +196,15 @@ def replay_sensor_log(
     slam = _sensor_log_slam(meta, where, config, resolution, dropped)
     frame = _header_frame(meta, where, slam.resolution)
     slam.check_robot(robot)
-    mapper = make_mapper(slam.mapper, frame, robot, slam)
     first = next(records, None)
     records = itertools.chain([first] if first is not None else [], records)
     dr = DeadReckoning(robot, frame.start, slam.localization)
     fixes = WallFixes(frame, robot, slam.box_fix, slam.heading_fix)
+    mapper = JournaledMapper(
+        lambda: make_mapper(slam.mapper, frame, robot, slam),
+        lambda: dr.distance_m,
+        keep=repairs_possible(frame, slam.box_fix),
+    )
     # Logs record where the encoders start (an O record); for older logs without one, the counts
     # are cumulative since start-up, so zero, taken at the clock's zero when the clock starts with
     # the run (the simulator's does), else at the first record.
@@ -238,6 +243,7 @@ def replay_sensor_log(
                     f"the header lists {n_sonars} sonars"
                 )
             pose = fixes.apply(dr, pose, rec.ranges, mapper.evidence())  # as the engine does
+            mapper.repair(fixes.take_repairs())
             mapper.integrate(pose, rec.ranges)
             mapper.mark_body(pose)
             sweeps.append((rec.t_s, pose.x, pose.y, pose.theta))

@@ -166,6 +166,7 @@ def simulate(
             "failed_moves": engine.stats.failed_moves,
             "heading_fixes": len(engine.fixes.heading_fixes),
             "bump_fixes": engine.fixes.contact_fixes,
+            "map_repairs": engine.mapper.repairs,
             "sweeps": engine.stats.sweeps,
             "distance_m": round(sim.odometer_m, 3),
         },

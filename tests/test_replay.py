@@ -78,6 +78,16 @@ def test_the_log_carries_the_engines_numbers_exactly(recorded_run: Path) -> None
     assert drift <= 0.5e-4 + 1e-9, f"replayed pose is {drift:.2g} off the engine's: the log rounds its numbers"
 
 
+def test_a_run_whose_map_was_repaired_replays_cell_for_cell(tmp_path: Path) -> None:
+    """The hall's seed 2 drifts past the fixes' fixed gate, and a fix past it rebuilds the map at
+    corrected poses (``robot.mapping.journal``): the replay of its log must do the same."""
+    assert main(["run", "--world", "hall", "--seed", "2", "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["map_repairs"] >= 1
+    assert main(["replay", str(tmp_path / "run" / "sensors.log"), "--out", str(tmp_path / "replay")]) == 0
+    run_map = read_csv(tmp_path / "run" / "map.csv")
+    assert np.array_equal(read_csv(tmp_path / "replay" / "map.csv"), run_map)
+
+
 def test_replay_accepts_the_run_directory_and_reports_json(
     recorded_run: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
