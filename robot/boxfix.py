@@ -230,6 +230,22 @@ class DriftGate:
         return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
 
 
+def _map_shows_edge(
+    evidence: Evidence,
+    hit: tuple[float, float],
+    horizontal: bool,
+    outward: float,
+    footprint_m: float,
+    config: BoxFixConfig,
+    span: tuple[float, float],
+) -> bool:
+    """The map's checks on a reading: the box edge solid across the beam's footprint (+-``footprint_m``)
+    and the wall on the edge along a stretch."""
+    if not edge_supported(evidence, hit, horizontal, outward, footprint_m, config):
+        return False
+    return config.along_window_m <= 0.0 or runs_along_edge(evidence, hit, horizontal, outward, config, span)
+
+
 def _median(values: list[float]) -> float:
     """np.median of a short list (the middle value, or the mean of the two middle ones) without its
     overhead: the same arithmetic."""
@@ -252,6 +268,7 @@ def box_offsets(
     config: BoxFixConfig,
     evidence: Evidence | None = None,
     gate: DriftGate | None = None,
+    trusted: tuple[Evidence | None, Evidence | None] | None = None,
 ) -> tuple[float | None, float | None]:
     """The position error (true minus estimated) [m] along x and along y that the box's walls show
     in one sweep (the median over the beams that count), or None for an axis no beam measured.
@@ -259,7 +276,10 @@ def box_offsets(
     With ``evidence`` (the map so far), a reading counts only where the map already shows the box
     edge as a wall across the beam's footprint, and on the edge along a longer stretch, not only
     where a wall comes close to it. With ``gate``, the gate grows with the distance driven (see
-    ``DriftGate``); without it, it is ``config.gate_m``.
+    ``DriftGate``); without it, it is ``config.gate_m``. ``trusted`` holds, per axis, the map as it
+    was at that axis's last fix within ``gate_m``: a reading past that gate that the map so far
+    refuses counts when that map shows the edge (the map so far may show the wall where the drifted
+    estimate put it).
     """
     if frame.extent is None or not config.enabled:
         return None, None
@@ -286,13 +306,14 @@ def box_offsets(
             if evidence is not None:
                 hit = (edge, beam.y) if horizontal else (beam.x, edge)
                 outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
-                if not edge_supported(evidence, hit, horizontal, outward, beam.range_m * math.tan(half), config):
-                    continue
                 span = (min_y, max_y) if horizontal else (min_x, max_x)
-                if config.along_window_m > 0.0 and not runs_along_edge(
-                    evidence, hit, horizontal, outward, config, span
-                ):
-                    continue
+                foot = beam.range_m * math.tan(half)
+                if not _map_shows_edge(evidence, hit, horizontal, outward, foot, config, span):
+                    # Past the fixed gate the estimate may have drifted, and the map with it: the map
+                    # as it was at the axis's last fix within the gate may show the edge instead.
+                    old = None if trusted is None or abs(offset) <= config.gate_m else trusted[0 if horizontal else 1]
+                    if old is None or not _map_shows_edge(old, hit, horizontal, outward, foot, config, span):
+                        continue
             if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset):
                 continue
             (dxs if horizontal else dys).append(offset)

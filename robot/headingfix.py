@@ -159,11 +159,14 @@ class WallFixes:
         self.gate = DriftGate(box)
         self._fixed_at = [0.0, 0.0]  # the odometer at each axis's last fix within the fixed gate [m]
         self._repairs: list[Repair] = []
+        self._trusted: list[Evidence | None] = [None, None]  # the map at each axis's last fix within the gate
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
         """The pose after this sweep's fixes (``pose`` itself when there are none)."""
         self.gate.follow(pose.x, pose.y)
-        ox, oy = box_offsets(self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate)
+        ox, oy = box_offsets(
+            self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate, (self._trusted[0], self._trusted[1])
+        )
         if ox is None and oy is None:
             return pose
         shift = [0.0, 0.0]
@@ -172,6 +175,7 @@ class WallFixes:
                 continue
             if abs(offset) <= self.box.gate_m:
                 self._fixed_at[axis] = dr.distance_m
+                self._trusted[axis] = evidence
             elif self.box.drift_repair:
                 # Readings along the wall agree that the estimate has drifted: correct it at once,
                 # and the map with it.

@@ -786,6 +786,38 @@ def test_a_drifted_estimate_is_fixed_again_once_readings_along_the_wall_agree() 
     assert any(x != 1.5 for x in xs[:9])
 
 
+def test_a_fix_past_the_gate_may_rely_on_the_map_from_before_the_drift() -> None:
+    """While the estimate drifted, walls were marked where it put them: the map so far shows the east
+    wall 8 cm inside the edge too, and refuses readings past the gate. The map as it was at the axis's
+    last fix within the gate shows the wall on the edge only, and readings it accepts count. Where
+    that map too showed a face inside the edge (a shelf seen before), they do not."""
+    from robot.boxfix import BoxFixConfig
+    from robot.headingfix import HeadingFixConfig, WallFixes
+
+    grid = GridSpec(0.0, 0.0, 0.2, 20, 10)  # 2 m east-west, 4 m north-south
+    frame = MapFrame(grid=grid, start=Pose(1.5, 0.1, 0.0), extent=(0.0, 0.0, 2.0, 4.0))
+    ys = np.arange(0.025, 4.0, 0.05)
+    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in ys])
+    drifted = _evidence_with_solid(frame, [(2.02, float(y)) for y in ys] + [(1.94, float(y)) for y in ys])
+
+    def drive(first_map) -> list[float]:
+        fixes = WallFixes(frame, ROBOT, BoxFixConfig(), HeadingFixConfig(enabled=False))
+        x, xs = 1.5, []
+        for i, y in enumerate(np.arange(0.1, 4.0, 0.2)):
+            believed = Pose(x, float(y), 0.0)
+            dr = DeadReckoning(ROBOT, believed)
+            ranges = np.full(8, ROBOT.sonar.max_range_m)
+            ranges[0] = 2.0 - 1.5 - ROBOT.sonars[0].offset_x_m
+            fixes.apply(dr, believed, ranges, first_map if i == 0 else drifted)
+            # Right at the first sweep; then 8 cm west of the truth, as after a drift.
+            x = dr.estimate.x if i > 0 else 1.42
+            xs.append(x)
+        return xs
+
+    assert abs(drive(wall)[-1] - 1.5) < 0.01
+    assert drive(drifted)[-1] == 1.42
+
+
 def test_a_repair_rebuilds_the_map_at_poses_corrected_in_proportion_to_the_distance_driven() -> None:
     from robot.mapping.journal import JournaledMapper, Repair
 
