@@ -74,7 +74,7 @@ class BoxFixConfig(BaseModel):
     # axis meets the box edge at a vertex, and near it passes the footprint check a few centimetres
     # inside the edge. Seen from the room, the first solid evidence may lie inner_band_m in from the
     # edge (past the evidence cell at the edge) along at most max_inner_share of the stretch (a
-    # window of 0 turns this off).
+    # window of 0 turns this off). A bump needs the same to be a fix.
     along_window_m: float = Field(default=0.6, ge=0.0)
     inner_band_m: tuple[float, float] = (0.05, 0.15)
     max_inner_share: float = Field(default=0.08, ge=0.0, le=1.0)

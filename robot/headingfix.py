@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, edge_supported
+from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, edge_supported, runs_along_edge
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
@@ -211,9 +211,10 @@ class WallFixes:
     ) -> tuple[Pose, bool]:
         """A bump while driving along ``direction_rad``. When the body would touch a box wall ahead
         within ``contact_gate_m`` of where the estimate puts it, and the map shows that edge as a
-        wall there (in a room that is not a rectangle an angled wall may meet the box edge), the
-        bump was that wall: it fixes the position across the wall, and needs no contact evidence.
-        Returns the pose and whether the bump should still be marked on the map."""
+        wall there and along a stretch of it (in a room that is not a rectangle an angled wall may
+        meet the box edge), the bump was that wall: it fixes the position across the wall, and needs
+        no contact evidence. Returns the pose and whether the bump should still be marked on the
+        map."""
         gate = self.box.contact_gate_m
         if self.frame.extent is None or not self.box.enabled or gate <= 0.0:
             return pose, True
@@ -232,6 +233,9 @@ class WallFixes:
             hit = (edge, pose.y) if axis == 0 else (pose.x, edge)
             span = (min_y, max_y) if axis == 0 else (min_x, max_x)
             if evidence is None or not edge_supported(evidence, hit, axis == 0, sign, half, self.box, span):
+                continue
+            # ... and the wall on the edge along a stretch, not a wall slanting into it at a vertex.
+            if self.box.along_window_m > 0.0 and not runs_along_edge(evidence, hit, axis == 0, sign, self.box, span):
                 continue
             best = (abs(offset), axis, offset)
         if best is None:

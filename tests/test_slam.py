@@ -620,6 +620,34 @@ def test_a_bump_where_a_corner_touches_the_box_edge_is_not_a_box_fix() -> None:
     assert not unexplained and (pose.x, pose.y) == pytest.approx((0.15, ROBOT.radius_m))
 
 
+def test_a_bump_into_a_wall_that_slants_into_the_box_edge_is_not_a_box_fix() -> None:
+    """In a room that is not a rectangle, two walls a few degrees off an axis can meet at a vertex on
+    the box edge. Echo arcs smear the vertex along the edge, enough for the check across the body's
+    width, but further along the walls run away from the edge: a bump into them is not the box wall
+    (a generated polygon ended 17.8 cm off after such a bump moved the estimate by 8.7 cm)."""
+    from robot.boxfix import BoxFixConfig
+    from robot.headingfix import HeadingFixConfig, WallFixes
+
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    frame = MapFrame(grid=grid, start=Pose(1.5, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
+    slant = math.tan(math.radians(6.0))
+    along = np.arange(-1.2, 1.2, 0.025)
+    solid = [(-0.01, 1.5 + float(t)) for t in along if abs(t) <= 0.4]  # the smear at the vertex
+    solid += [(slant * abs(float(t)) - 0.01, 1.5 + float(t)) for t in along]  # the two walls
+    evidence = _evidence_with_solid(frame, solid)
+    believed = Pose(ROBOT.radius_m + 0.08, 1.5, math.pi)  # 8 cm short of touching the box edge
+
+    def bump(config: BoxFixConfig) -> tuple[Pose, bool]:
+        dr = DeadReckoning(ROBOT, believed)
+        return WallFixes(frame, ROBOT, config, HeadingFixConfig()).contact(dr, believed, math.pi, evidence)
+
+    pose, unexplained = bump(BoxFixConfig())
+    assert unexplained and pose == believed
+    # Without the check along the edge, the bump passes for the box wall.
+    pose, unexplained = bump(BoxFixConfig(along_window_m=0.0))
+    assert not unexplained and pose.x == pytest.approx(ROBOT.radius_m)
+
+
 def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
     """In a 7 x 6 m room most of the run is far from any wall: with heading fixes off, the gyro's
     drift leaves the heading over a degree off by the end, and the position drifts with it (on
