@@ -254,12 +254,6 @@ def _median(values: list[float]) -> float:
     return ordered[mid] if len(ordered) % 2 else (ordered[mid - 1] + ordered[mid]) / 2.0
 
 
-def box_shift(config: BoxFixConfig, offsets: tuple[float | None, float | None]) -> tuple[float, float]:
-    """(dx, dy) [m] to add to the estimated position for the offsets ``box_offsets`` measured."""
-    ox, oy = offsets
-    return (config.gain * ox if ox is not None else 0.0), (config.gain * oy if oy is not None else 0.0)
-
-
 def box_offsets(
     frame: MapFrame,
     robot: RobotConfig,

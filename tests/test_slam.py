@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from robot.boxfix import box_offsets, box_shift
+from robot.boxfix import box_offsets
 from robot.config import RobotConfig, SimNoise
 from robot.engine import SlamEngine, classify
 from robot.errors import ConfigError
@@ -664,8 +664,10 @@ def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
 
 
 def _box_fix(frame: MapFrame, robot: RobotConfig, pose: Pose, ranges, config, evidence=None) -> tuple[float, float]:
-    """The position shift one sweep's box fixes make, as ``WallFixes.apply`` applies it."""
-    return box_shift(config, box_offsets(frame, robot, pose, ranges, config, evidence))
+    """The position shift one sweep's box fixes within the fixed gate make, as ``WallFixes.apply``
+    applies it: ``gain`` times the offsets."""
+    ox, oy = box_offsets(frame, robot, pose, ranges, config, evidence)
+    return (config.gain * ox if ox is not None else 0.0), (config.gain * oy if oy is not None else 0.0)
 
 
 def _position_error_p90(result: RunResult) -> float:
