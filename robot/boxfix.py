@@ -230,18 +230,20 @@ class DriftGate:
         return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
 
 
-def _map_shows_edge(
+def map_shows_edge(
     evidence: Evidence,
     hit: tuple[float, float],
     horizontal: bool,
     outward: float,
-    footprint_m: float,
+    half_width: float,
     config: BoxFixConfig,
     span: tuple[float, float],
+    clip_to_span: bool = False,
 ) -> bool:
-    """The map's checks on a reading: the box edge solid across the beam's footprint (+-``footprint_m``)
-    and the wall on the edge along a stretch."""
-    if not edge_supported(evidence, hit, horizontal, outward, footprint_m, config):
+    """The map's checks on a sonar reading or a bump at ``hit``: the box edge solid over
+    +-``half_width`` (the beam's footprint, or the body's support; clipped to ``span``, the edge's
+    extent, with ``clip_to_span``) and the wall on the edge along a stretch."""
+    if not edge_supported(evidence, hit, horizontal, outward, half_width, config, span if clip_to_span else None):
         return False
     return config.along_window_m <= 0.0 or runs_along_edge(evidence, hit, horizontal, outward, config, span)
 
@@ -302,11 +304,11 @@ def box_offsets(
                 outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
                 span = (min_y, max_y) if horizontal else (min_x, max_x)
                 foot = beam.range_m * math.tan(half)
-                if not _map_shows_edge(evidence, hit, horizontal, outward, foot, config, span):
+                if not map_shows_edge(evidence, hit, horizontal, outward, foot, config, span):
                     # Past the fixed gate the estimate may have drifted, and the map with it: the map
                     # as it was at the axis's last fix within the gate may show the edge instead.
                     old = None if trusted is None or abs(offset) <= config.gate_m else trusted[0 if horizontal else 1]
-                    if old is None or not _map_shows_edge(old, hit, horizontal, outward, foot, config, span):
+                    if old is None or not map_shows_edge(old, hit, horizontal, outward, foot, config, span):
                         continue
             if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset):
                 continue

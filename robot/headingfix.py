@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, edge_supported, runs_along_edge
+from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, map_shows_edge
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
@@ -232,10 +232,9 @@ class WallFixes:
                 continue
             hit = (edge, pose.y) if axis == 0 else (pose.x, edge)
             span = (min_y, max_y) if axis == 0 else (min_x, max_x)
-            if evidence is None or not edge_supported(evidence, hit, axis == 0, sign, half, self.box, span):
-                continue
-            # ... and the wall on the edge along a stretch, not a wall slanting into it at a vertex.
-            if self.box.along_window_m > 0.0 and not runs_along_edge(evidence, hit, axis == 0, sign, self.box, span):
+            # The edge solid along the body's support, and the wall on the edge along a stretch, not a
+            # wall slanting into it at a vertex.
+            if evidence is None or not map_shows_edge(evidence, hit, axis == 0, sign, half, self.box, span, True):
                 continue
             best = (abs(offset), axis, offset)
         if best is None:
