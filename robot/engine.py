@@ -277,6 +277,7 @@ class SlamEngine:
         action: Action = self.explorer.decide(
             current, est.theta, self._belief, self._passable, self._free_fraction, self._doubtful(),
             seek_frontier=self._settled(self.config.seek_frontier_steps),
+            give_up_closed=self._settled(self.config.give_up_steps),
         )  # fmt: skip
         self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
         ok = True

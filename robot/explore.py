@@ -159,12 +159,14 @@ class Explorer:
         free_fraction: NDArray[np.float64],
         doubtful: NDArray[np.bool_] | None = None,
         seek_frontier: bool = False,
+        give_up_closed: bool = False,
     ) -> Action:
         """The next action from navigation cell ``current`` facing ``heading_rad``.
 
         ``seek_frontier`` (the map has settled while unresolved cells remain): head for the nearest
         unvisited cell next to the frontier, or else look from the nearest visited one, instead of
-        walking on depth-first through explored floor.
+        walking on depth-first through explored floor. ``give_up_closed`` as well (the map has been
+        settled for longer): when no cell beside the frontier can be reached, give the frontier up.
         """
         self.visited[current] = True
         trav = self.traversable(free_fraction)
@@ -175,9 +177,15 @@ class Explorer:
                 # Cells not stood in yet first (a walk along the frontier sees more than a look from
                 # one spot), then a look from where the robot has been, as at the walk's end.
                 for spots_in in (trav & ~self.visited, self.visited):
-                    action, _ = self._search(current, trav, front, relaxed=False, seek_in=spots_in)
+                    action, reached = self._search(current, trav, front, relaxed=False, seek_in=spots_in)
                     if action is not None:
                         return action
+                # No cell beside them can be reached, though the robot can still get back to most of
+                # where it has been: the map has closed them off (the inside of furniture seen
+                # through a gap narrower than the robot, or cells behind one it stood in before it
+                # was found occupied). Walking on may still open a view of them, but not for ever.
+                if give_up_closed and not self._cut_off(reached):
+                    self.given_up.update(zip(*np.nonzero(front), strict=True))
         first = direction_index(heading_rad)
         for k in range(8):
             d = CLOCKWISE[(first + k) % 8]

@@ -43,6 +43,9 @@ class SlamConfig(BaseModel):
     # With end_when_mapped: once the map has not changed for this many steps while unresolved cells
     # remain, head for them instead of walking on depth-first through explored floor.
     seek_frontier_steps: int = Field(default=80, ge=1)
+    # ... and once it has not changed for this many, give up the unresolved cells that no cell beside
+    # them can be reached from, rather than walk on through the rest of the room to the time limit.
+    give_up_steps: int = Field(default=300, ge=1)
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()

@@ -373,6 +373,41 @@ def test_a_settled_map_sends_the_robot_to_the_frontier_instead_of_on_through_exp
     assert again.kind == "move" and again.reason == "explore"
 
 
+def test_a_settled_map_gives_up_unknown_cells_it_has_closed_off_instead_of_walking_on() -> None:
+    """A pillar's inside stayed unknown, next to a cell the robot had stood in before the map found
+    the pillar there: no cell beside it could be reached, and the hall's seed 4 walked on until the
+    20-minute time limit."""
+    grid = GridSpec(0.0, 0.0, 0.2, 5, 8)
+    states = np.full(grid.shape, FREE, dtype=np.int8)
+    states[1:4, 4:7] = OCCUPIED
+    states[2, 5] = UNKNOWN  # the pillar's inside
+    free_fraction = np.where(states == FREE, 1.0, -1.0)
+    passable = states == FREE
+
+    def settled() -> Explorer:
+        explorer = Explorer(grid, 1, (2, 1))
+        explorer.visited[:, :4] = True
+        explorer.visited[2, 4] = True  # stood in before it was found occupied
+        return explorer
+
+    explorer = settled()
+    assert explorer.frontier(states, passable)[2, 5]
+    action = explorer.decide((2, 1), 0.0, states, passable, free_fraction, seek_frontier=True, give_up_closed=True)
+    assert action.reason != "frontier" and (2, 5) in explorer.given_up
+    assert not explorer.frontier(states, passable).any()
+    # Settled for less time, or walking on depth-first, the robot keeps the cell to resolve.
+    for seek in (True, False):
+        walking = settled()
+        walking.decide((2, 1), 0.0, states, passable, free_fraction, seek_frontier=seek)
+        assert not walking.given_up
+    # A robot cut off from where it has been (here by a bump on each side) keeps it too.
+    boxed = settled()
+    boxed.bumped[1:4, 0:3] = True
+    boxed.bumped[2, 1] = False
+    boxed.decide((2, 1), 0.0, states, passable, free_fraction, seek_frontier=True, give_up_closed=True)
+    assert not boxed.given_up
+
+
 def test_a_far_arm_of_a_large_room_is_mapped_although_the_near_one_settles_long_before() -> None:
     """Walking the explored 4 x 5.4 m arm depth-first cell by cell took longer than the time limit,
     and the run ended with the far half of the 7.5 m arm unseen (F1 0.78)."""
