@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from robot.grid import GridSpec
 from robot.mapping.tangents import Line, TangentLines, TangentParams, _off, _trimmed_ends
@@ -117,6 +118,72 @@ def test_straight_walls_recover_cells_that_angled_walls_clip() -> None:
     assert with_walls.trajectory == without.trajectory
     assert with_walls.metrics.recall > without.metrics.recall
     assert with_walls.metrics.f1 > without.metrics.f1
+
+
+def test_face_cells_past_a_wall_leaning_off_the_box_edge_are_left_to_their_evidence() -> None:
+    """The few centimetres inside the room box count as its wall's face (free floor up to it), but
+    not behind a wall found a little off the edge's direction: in a room that is not a box, such a
+    wall meets the box edge at a vertex and runs just inside it."""
+    from robot.config import RobotConfig
+    from robot.mapping.base import MapFrame
+    from robot.mapping.logodds import LogOddsMapper
+    from robot.world import Pose
+
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    mapper = LogOddsMapper(MapFrame(grid=grid, start=Pose(1.5, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 3.0)), RobotConfig())
+
+    def leaning(x_top: float) -> Line:
+        """The left wall, from (0, 0.3) to (x_top, 2.7), touched all along."""
+        theta = math.atan2(x_top, -2.4)  # the normal into the wall
+        d = math.sin(theta) * 0.3
+        s0, s1 = sorted(-math.sin(theta) * x + math.cos(theta) * y for x, y in ((0.0, 0.3), (x_top, 2.7)))
+        return Line(theta=theta, d=d, s0=s0, s1=s1, echoes=40, scatter=0.01)
+
+    def face_past(line: Line, x: float, y: float) -> bool:
+        row, col = mapper.fine.world_to_index(x, y)
+        past = np.zeros(mapper.fine.shape, dtype=bool)
+        past[mapper._inner] = mapper._past_slanting_walls([line]) & mapper._face_band
+        return bool(past[row, col])
+
+    wall = leaning(0.1)  # 2.4 degrees off the edge
+    assert math.degrees(abs(math.remainder(wall.theta, math.pi / 2))) == pytest.approx(2.39, abs=0.01)
+    # Where the wall runs 3 cm or more inside the edge, the face cell (0-5 cm) lies behind it.
+    assert face_past(wall, 0.025, 1.025) and face_past(wall, 0.025, 2.525)
+    # Near the vertex the wall is on the edge; past the stretch the echoes touched, nothing is known;
+    # the other edges keep their faces.
+    assert not face_past(wall, 0.025, 0.375)
+    assert not face_past(wall, 0.025, 2.925)
+    assert not face_past(wall, 2.975, 1.525) and not face_past(wall, 1.525, 0.025)
+    # A wall found within 1.5 degrees of the edge is the box's own (seen with some pose error).
+    assert not face_past(leaning(0.04), 0.025, 2.525)
+
+
+def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips() -> None:
+    """A generated polygon whose left wall leans 2.4 degrees off the box edge, up to 12 cm inside it:
+    the cells it clips were white, their part behind the wall taken for the box wall's face."""
+    from robot.runner import simulate
+    from robot.settings import load_run_config
+    from robot.world import world_from_dict
+
+    world = world_from_dict(
+        {
+            "name": "leaning",
+            "boundary": [[4.17, 2.66], [2.63, 4.44], [0.12, 3.8], [0.0, 0.95], [2.99, 0.0]],
+            "start": {"x": 1.5, "y": 3.77, "theta_deg": 180.0},
+            "obstacles": [
+                {"shape": "rect", "center": [0.66, 1.24], "size": [0.93, 0.44], "angle_deg": 0.0},
+                {"shape": "circle", "center": [2.54, 0.48], "radius": 0.21},
+            ],
+        },
+        "leaning.toml",
+    )
+    cfg = load_run_config()
+    off = cfg.slam.model_copy(update={"logodds": cfg.slam.logodds.model_copy(update={"face_slant_deg": 45.0})})
+    kept = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    lost = simulate(world, cfg.robot, cfg.noise, off, seed=0)
+    assert kept.trajectory == lost.trajectory  # only the final map changes
+    assert kept.metrics.recall > lost.metrics.recall
+    assert kept.metrics.f1 > lost.metrics.f1
 
 
 def test_trimmed_ends_are_numpys_percentiles() -> None:

@@ -29,7 +29,7 @@ from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
 from robot.mapping.geometry import Cones, cones, place_beams
-from robot.mapping.tangents import TangentLines, TangentParams
+from robot.mapping.tangents import Line, TangentLines, TangentParams
 from robot.world import Pose
 
 
@@ -53,7 +53,8 @@ class LogOddsParams(BaseModel):
     max_echo_range_m: float = Field(default=2.0, gt=0.0)  # echoes beyond this are not mapped
     occ_full_m: float = Field(default=0.6, gt=0.0)  # full occupied weight up to here, then fading
     occ_far_weight: float = Field(default=0.3, ge=0.0, le=1.0)  # ... to this at max_echo_range_m
-    extent_snap_m: float = Field(default=0.03, ge=0.0)  # echoes this close inside the room box are its wall
+    extent_snap_m: float = Field(default=0.03, ge=0.0)  # echoes this close inside the room box are its wall ...
+    face_slant_deg: float = Field(default=1.5, ge=0.0, le=45.0)  # ... but behind a wall this far off its edge
     free_edge_weight: float = Field(default=0.5, ge=0.0, le=1.0)  # free weight at the cone edge
     arc_edge_weight: float = Field(default=0.6, ge=0.0, le=1.0)  # occupied prior at the cone edge
     free_discount: float = Field(default=1.5, ge=0.0)  # arc share falls as exp(discount * free evidence)
@@ -200,8 +201,10 @@ class LogOddsMapper:
             self._fine_outside = np.zeros((grid.rows * self.k, grid.cols * self.k), dtype=bool)
             self._near_extent = self._fine_outside
         # The few centimetres inside the room's surveyed box are the face of its outer wall: echoes
-        # there come from the wall, and the floor up to it is free.
-        self._wall_face = self._near_extent & ~self._fine_outside
+        # there come from the wall, and the floor up to it is free (see ``finalize`` for the
+        # exception).
+        self._face_band = self._near_extent & ~self._fine_outside
+        self._wall_face = self._face_band
 
     def _fine_outside_extent(self, extent: tuple[float, float, float, float], margin_m: float) -> NDArray[np.bool_]:
         """Fine cells of the map's area whose centre lies outside the room box shrunk by ``margin_m``."""
@@ -490,20 +493,45 @@ class LogOddsMapper:
     def finalize(self) -> None:
         self._update_support(full=True)
         if self._tangents is not None:
-            self._cut = self._wall_cuts(self._tangents)
+            occupied = self.logodds >= self.params.occ_threshold
+            walls = [w for w in self._tangents.lines() if self._tangents.on_evidence(w, self.fine, occupied)]
+            extent = self.frame.extent
+            near = [extent is not None and self._tangents.near_box(w, extent) for w in walls]
+            self._cut = self._wall_cuts(self._tangents, [w for w, n in zip(walls, near, strict=True) if not n])
+            self._wall_face = self._face_band & ~self._past_slanting_walls(
+                [w for w, n in zip(walls, near, strict=True) if n]
+            )
+            self._changed(occupied=False)
 
-    def _wall_cuts(self, tangents: TangentLines) -> NDArray[np.bool_]:
-        """Map cells that the straight walls the echoes agree on cut into, except where the robot's
-        body has been on the far side of the wall (then it is not a wall there: a doorway, say)."""
-        occupied = self.logodds >= self.params.occ_threshold
+    def _past_slanting_walls(self, walls: list[Line]) -> NDArray[np.bool_]:
+        """Evidence cells of the map's area past a straight wall near the room box's edge that runs
+        at least ``face_slant_deg`` off the edge, over the stretch the echoes touched it.
+
+        In a room that is not a box, such a wall meets the box edge at a vertex and runs a few
+        centimetres inside it; the face cells behind it are not the outer wall's face, and are left
+        to their own evidence. The walls of the box, found from echoes, run within a degree of it."""
+        rows, cols = self._inner
+        xs, ys = self._centre_x[None, cols], self._centre_y[rows, None]
+        past = np.zeros(self._face_band.shape, dtype=bool)
+        half = 0.5 * self.fine.resolution
+        margin = self.params.tangents.margin_m
+        for wall in walls:
+            if abs(math.remainder(wall.theta, math.pi / 2)) < math.radians(self.params.face_slant_deg):
+                continue
+            c, s = math.cos(wall.theta), math.sin(wall.theta)
+            reach = half * (abs(c) + abs(s))  # how far a cell's corners reach from its centre
+            along = -s * xs + c * ys
+            past |= (wall.depth(xs, ys) + reach >= margin) & (along >= wall.s0 - half) & (along <= wall.s1 + half)
+        return past
+
+    def _wall_cuts(self, tangents: TangentLines, walls: list[Line]) -> NDArray[np.bool_]:
+        """Map cells that the straight walls the echoes agree on (``walls``, on the evidence and not
+        the room box's own) cut into, except where the robot's body has been on the far side of the
+        wall (then it is not a wall there: a doorway, say)."""
         rows, cols = self._inner
         xs, ys, body = self._centre_x[None, cols], self._centre_y[rows, None], self._body[self._inner]
         cut = np.zeros(self.frame.grid.shape, dtype=bool)
-        for wall in tangents.lines():
-            if not tangents.on_evidence(wall, self.fine, occupied):
-                continue
-            if self.frame.extent is not None and tangents.near_box(wall, self.frame.extent):
-                continue
+        for wall in walls:
             cells = tangents.cut_cells(self.frame.grid, [wall])
             if cells.any():
                 past = body & (wall.depth(xs, ys) > 0.0)
