@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from robot.grid import GridSpec
-from robot.mapping.tangents import Line, TangentLines, TangentParams, _off, _trimmed_ends
+from robot.mapping.tangents import Line, TangentLines, TangentParams, _off, _trimmed_ends, meet_at_corners
 
 HALF = math.radians(15.0)
 
@@ -87,6 +87,28 @@ def test_a_cell_is_cut_when_the_wall_reaches_past_the_margin_into_it() -> None:
     assert not default.cut_cells(grid, [inside]).any()
     turned = Line(theta=math.radians(5.0), d=0.37, s0=0.0, s1=0.6, echoes=10, scatter=0.01)
     assert default.cut_cells(grid, [turned])[:, 1].any()
+
+
+def test_walls_are_extended_to_the_corner_where_they_meet() -> None:
+    """Echoes seldom touch a wall near a corner, so the stretches found stop short of it."""
+    east = Line(theta=0.0, d=1.0, s0=0.2, s1=0.7, echoes=20, scatter=0.01)  # x = 1, touched for y 0.2-0.7
+    north = Line(theta=math.pi / 2, d=1.0, s0=-0.75, s1=-0.2, echoes=20, scatter=0.01)  # y = 1, x 0.2-0.75
+    params = TangentParams(corner_reach_m=0.4)
+    a, b = meet_at_corners([east, north], params)
+    assert (a.s0, a.s1) == pytest.approx((0.2, 1.0)) and (b.s0, b.s1) == pytest.approx((-1.0, -0.2))
+    assert a.along(1.0, 1.0) == pytest.approx(1.0) and b.along(1.0, 1.0) == pytest.approx(-1.0)
+    # A corner farther than the reach from either stretch is not assumed.
+    assert meet_at_corners([east, north], TangentParams(corner_reach_m=0.2)) == [east, north]
+    # Nor between walls a few degrees apart, which meet far away if at all.
+    turned = Line(theta=math.radians(10.0), d=1.05, s0=1.0, s1=1.5, echoes=20, scatter=0.01)
+    assert meet_at_corners([east, turned], params) == [east, turned]
+    # A wall that ends short of another one's stretch (a partition) is extended to it; the other is not.
+    partition = Line(theta=0.0, d=0.5, s0=0.2, s1=0.8, echoes=20, scatter=0.01)  # x = 0.5, up to y 0.8
+    c, d = meet_at_corners([partition, north], params)
+    assert (c.s0, c.s1) == pytest.approx((0.2, 1.0)) and d == north
+    # Walls that cross within both stretches are left as they are.
+    crossing = Line(theta=0.0, d=0.5, s0=0.2, s1=1.4, echoes=20, scatter=0.01)
+    assert meet_at_corners([crossing, north], params) == [crossing, north]
 
 
 def test_a_line_must_run_along_occupied_evidence() -> None:

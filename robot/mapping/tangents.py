@@ -18,7 +18,7 @@ are blocked. They are found once, when the run's map is finalised (the explorer 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,6 +51,11 @@ class TangentParams(BaseModel):
     # Faces along the grid's axes are left to the evidence grid: a face on a cell boundary (rooms
     # are written on a 5 cm step) seen with 2 cm of pose error would cut the free cell beside it.
     min_axis_angle_deg: float = Field(default=3.0, ge=0.0, le=45.0)
+    # Echoes seldom touch a wall near a corner (the corner answers first), so a wall's stretch is
+    # extended to where it meets another wall found, when that lies within corner_reach_m past the
+    # ends of both stretches (or on the other's) and the two meet at corner_min_deg or more.
+    corner_reach_m: float = Field(default=0.4, ge=0.0)
+    corner_min_deg: float = Field(default=15.0, gt=0.0, le=90.0)
 
 
 def _off(theta: float, axes: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -96,6 +101,36 @@ class Line:
     def depth(self, xs: NDArray[np.float64], ys: NDArray[np.float64]) -> NDArray[np.float64]:
         """How far points lie past the line into the wall [m] (negative: on the room's side)."""
         return math.cos(self.theta) * xs + math.sin(self.theta) * ys - self.d
+
+    def along(self, x: float, y: float) -> float:
+        """Where the point lies along the line (s)."""
+        return -math.sin(self.theta) * x + math.cos(self.theta) * y
+
+
+def meet_at_corners(lines: list[Line], params: TangentParams) -> list[Line]:
+    """``lines`` with each stretch extended to where it meets another line (see ``TangentParams``),
+    never shortened."""
+    reach = params.corner_reach_m
+    min_sin = math.sin(math.radians(params.corner_min_deg))
+    out = []
+    for a in lines:
+        s0, s1 = a.s0, a.s1
+        for b in lines:
+            det = math.sin(b.theta - a.theta)
+            if b is a or abs(det) < min_sin:
+                continue
+            # n_a . p = d_a and n_b . p = d_b
+            x = (a.d * math.sin(b.theta) - b.d * math.sin(a.theta)) / det
+            y = (b.d * math.cos(a.theta) - a.d * math.cos(b.theta)) / det
+            sa, sb = a.along(x, y), b.along(x, y)
+            if not b.s0 - reach <= sb <= b.s1 + reach:
+                continue
+            if a.s1 < sa <= a.s1 + reach:
+                s1 = max(s1, sa)
+            elif a.s0 - reach <= sa < a.s0:
+                s0 = min(s0, sa)
+        out.append(a if (s0, s1) == (a.s0, a.s1) else replace(a, s0=s0, s1=s1))
+    return out
 
 
 class TangentLines:
