@@ -214,12 +214,13 @@ class SlamEngine:
     def _mapped(self) -> bool:
         """Whether the map is finished: nothing left to resolve in reach, the belief settled, and no
         occupied cell alone in free floor (a stray echo, which the sweeps of the rest of the walk
-        would clear, or a chair leg: then the walk goes on)."""
+        would clear, or a chair leg: then the walk goes on, until the map has not changed for
+        ``give_up_steps``: what the sweeps have not cleared by then is a chair leg)."""
         if not self._settled(self.config.settle_steps):
             return False
         if self.explorer.frontier(self._belief, self._passable, self._doubtful()).any():
             return False
-        return not lone_occupied(self._belief).any()
+        return self._settled(self.config.give_up_steps) or not lone_occupied(self._belief).any()
 
     def _doubtful(self) -> NDArray[np.bool_] | None:
         """Occupied cells (not the room's surveyed wall) that touch unknown space: worth a closer look."""

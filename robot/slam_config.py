@@ -44,7 +44,8 @@ class SlamConfig(BaseModel):
     # remain, head for them instead of walking on depth-first through explored floor.
     seek_frontier_steps: int = Field(default=80, ge=1)
     # ... and once it has not changed for this many, give up the unresolved cells that no cell beside
-    # them can be reached from, rather than walk on through the rest of the room to the time limit.
+    # them can be reached from, and take a black cell alone in free floor that the sweeps have not
+    # cleared for a chair leg, rather than walk on through the rest of the room to the time limit.
     give_up_steps: int = Field(default=300, ge=1)
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()

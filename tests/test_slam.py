@@ -504,6 +504,12 @@ def test_a_run_ends_early_only_on_a_settled_map_without_stray_cells() -> None:
     engine._last_change_step -= 1
     belief[4, 5] = OCCUPIED  # a black cell alone in free floor
     assert not engine._mapped()
+    # ... until the map has not changed for give_up_steps: the sweeps since have not cleared it, so
+    # it is a chair leg (a clutter room walked on to the time limit, its map done 300 steps before).
+    engine._last_change_step = engine.stats.steps - engine.config.give_up_steps
+    assert engine._mapped()
+    engine._last_change_step += 1
+    assert not engine._mapped()
     belief[4, 5] = UNKNOWN  # an unresolved cell in reach
     assert not engine._mapped()
 
