@@ -505,8 +505,9 @@ class LogOddsMapper:
             self._changed(occupied=False)
 
     def _past_slanting_walls(self, walls: list[Line]) -> NDArray[np.bool_]:
-        """Evidence cells of the map's area past a straight wall near the room box's edge that runs
-        at least ``face_slant_deg`` off the edge, over the stretch the echoes touched it.
+        """Evidence cells of the map's area that reach ``tangents.margin_m`` or more past a straight
+        wall near the room box's edge that runs at least ``face_slant_deg`` off the edge, over the
+        stretch the echoes touched it (extended to a corner).
 
         In a room that is not a box, such a wall meets the box edge at a vertex and runs a few
         centimetres inside it; the face cells behind it are not the outer wall's face, and are left
