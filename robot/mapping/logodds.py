@@ -516,14 +516,10 @@ class LogOddsMapper:
         xs, ys = self._centre_x[None, cols], self._centre_y[rows, None]
         past = np.zeros(self._face_band.shape, dtype=bool)
         half = 0.5 * self.fine.resolution
-        margin = self.params.tangents.margin_m
         for wall in walls:
             if abs(math.remainder(wall.theta, math.pi / 2)) < math.radians(self.params.face_slant_deg):
                 continue
-            c, s = math.cos(wall.theta), math.sin(wall.theta)
-            reach = half * (abs(c) + abs(s))  # how far a cell's corners reach from its centre
-            along = -s * xs + c * ys
-            past |= (wall.depth(xs, ys) + reach >= margin) & (along >= wall.s0 - half) & (along <= wall.s1 + half)
+            past |= wall.cells_past(xs, ys, half, self.params.tangents.margin_m)
         return past
 
     def _wall_cuts(self, tangents: TangentLines, walls: list[Line]) -> NDArray[np.bool_]:

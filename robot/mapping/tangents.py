@@ -106,6 +106,19 @@ class Line:
         """Where the point lies along the line (s)."""
         return -math.sin(self.theta) * x + math.cos(self.theta) * y
 
+    def corner_reach(self, half: float) -> float:
+        """How far the corners of a cell of side ``2 * half`` reach from its centre across the line."""
+        return half * (abs(math.cos(self.theta)) + abs(math.sin(self.theta)))
+
+    def cells_past(
+        self, xs: NDArray[np.float64], ys: NDArray[np.float64], half: float, margin: float
+    ) -> NDArray[np.bool_]:
+        """Cells (centres ``xs``, ``ys``, side ``2 * half``) that reach ``margin`` or more past the
+        line into the wall, along its touched stretch (widened by half a cell)."""
+        along = -math.sin(self.theta) * xs + math.cos(self.theta) * ys
+        past = self.depth(xs, ys) + self.corner_reach(half) >= margin
+        return past & (along >= self.s0 - half) & (along <= self.s1 + half)
+
 
 def meet_at_corners(lines: list[Line], params: TangentParams) -> list[Line]:
     """``lines`` with each stretch extended to where it meets another line (see ``TangentParams``),
@@ -333,11 +346,7 @@ class TangentLines:
             off_axis = abs(math.remainder(line.theta, math.pi / 2))
             if off_axis < math.radians(self.params.min_axis_angle_deg):
                 continue
-            c, s = math.cos(line.theta), math.sin(line.theta)
-            depth = line.depth(xs, ys)
-            reach = half * (abs(c) + abs(s))  # how far a cell's corners reach from its centre
-            along = -s * xs + c * ys
-            cut = (depth - reach < 0.0) & (depth + reach >= self.params.margin_m)
-            cut &= (along >= line.s0 - half) & (along <= line.s1 + half)
-            out |= cut
+            # Crossed by the line (not wholly past it), and reaching the margin past it.
+            crossed = line.depth(xs, ys) - line.corner_reach(half) < 0.0
+            out |= crossed & line.cells_past(xs, ys, half, self.params.margin_m)
         return out
