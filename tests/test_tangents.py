@@ -89,6 +89,24 @@ def test_a_cell_is_cut_when_the_wall_reaches_past_the_margin_into_it() -> None:
     assert default.cut_cells(grid, [turned])[:, 1].any()
 
 
+def test_a_wall_a_little_off_an_axis_cuts_only_the_cells_it_reaches_well_into() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 6, 3)
+    lines = TangentLines(HALF, TangentParams(enabled=True))
+    p = lines.params
+    assert p.near_axis_min_deg <= 2.0 < p.min_axis_angle_deg and p.near_axis_margin_m == pytest.approx(0.03)
+    # A wall turned 2 degrees off the y axis, through (0.399, 0): it reaches sin(2 deg) * y_top + 1 mm
+    # past the middle column's top right corners, 3 cm or more only in the top two rows (y_top 1.0, 1.2).
+    theta = math.radians(2.0)
+    leaning = Line(theta=theta, d=0.399 * math.cos(theta), s0=-0.1, s1=1.3, echoes=10, scatter=0.01)
+    cut = lines.cut_cells(grid, [leaning])
+    assert cut[:, 1].tolist() == [True, True, False, False, False, False]  # row 0 holds the largest y
+    assert not cut[:, 0].any() and not cut[:, 2].any()
+    # At a degree off the axis it is left to the evidence grid, as a face along the axis.
+    theta = math.radians(1.0)
+    nearly = Line(theta=theta, d=0.399 * math.cos(theta), s0=-0.1, s1=1.3, echoes=10, scatter=0.01)
+    assert not lines.cut_cells(grid, [nearly]).any()
+
+
 def test_walls_are_extended_to_the_corner_where_they_meet() -> None:
     """Echoes seldom touch a wall near a corner, so the stretches found stop short of it."""
     east = Line(theta=0.0, d=1.0, s0=0.2, s1=0.7, echoes=20, scatter=0.01)  # x = 1, touched for y 0.2-0.7
