@@ -3,12 +3,21 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from robot.grid import GridSpec
-from robot.mapping.tangents import Line, TangentLines, TangentParams, _off, _trimmed_ends, meet_at_corners
+from robot.mapping.tangents import (
+    Line,
+    TangentLines,
+    TangentParams,
+    _off,
+    _trimmed_ends,
+    box_walls,
+    meet_at_corners,
+)
 
 HALF = math.radians(15.0)
 
@@ -127,6 +136,25 @@ def test_walls_are_extended_to_the_corner_where_they_meet() -> None:
     # Walls that cross within both stretches are left as they are.
     crossing = Line(theta=0.0, d=0.5, s0=0.2, s1=1.4, echoes=20, scatter=0.01)
     assert meet_at_corners([crossing, north], params) == [crossing, north]
+
+
+def test_walls_are_extended_to_the_room_box_they_meet() -> None:
+    """A room that is not a box touches its box at vertices: a wall leaving one is extended to the
+    box edge, and the box's own edges are not among the walls returned."""
+    box = box_walls((0.0, 0.0, 3.0, 2.0))
+    assert [(round(math.degrees(w.theta)), w.d) for w in box] == [(0, 3.0), (90, 2.0), (180, -0.0), (-90, -0.0)]
+    # x + y = 2.5 (normal at 45 degrees), touched from (1.5, 1.0) to (1.0, 1.5): it meets the top edge
+    # at (0.5, 2.0), 0.71 m past the stretch's end, and the other edges farther away.
+    theta = math.pi / 4
+    slanted = Line(theta=theta, d=2.5 / math.sqrt(2.0), s0=0.0, s1=0.0, echoes=20, scatter=0.01)
+    slanted = replace(slanted, s0=slanted.along(1.5, 1.0), s1=slanted.along(1.0, 1.5))
+    params = TangentParams(corner_reach_m=0.4)
+    assert meet_at_corners([slanted], params) == [slanted]  # no other wall found: as it is
+    # The stretch touched up to (0.75, 1.75) ends 0.35 m short of the top edge: it is run on to it.
+    near = replace(slanted, s0=slanted.along(1.5, 1.0), s1=slanted.along(0.75, 1.75))
+    (out,) = meet_at_corners([near], params, box)
+    assert out.s1 == pytest.approx(slanted.along(0.5, 2.0)) and out.s0 == near.s0
+    assert meet_at_corners([slanted], params, box) == [slanted]
 
 
 def test_a_line_must_run_along_occupied_evidence() -> None:

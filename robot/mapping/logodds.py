@@ -29,7 +29,7 @@ from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
 from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
 from robot.mapping.geometry import Cones, cones, place_beams
-from robot.mapping.tangents import Line, TangentLines, TangentParams, meet_at_corners
+from robot.mapping.tangents import Line, TangentLines, TangentParams, box_walls, meet_at_corners
 from robot.world import Pose
 
 
@@ -495,8 +495,9 @@ class LogOddsMapper:
         if self._tangents is not None:
             occupied = self.logodds >= self.params.occ_threshold
             walls = [w for w in self._tangents.lines() if self._tangents.on_evidence(w, self.fine, occupied)]
-            walls = meet_at_corners(walls, self._tangents.params)
             extent = self.frame.extent
+            box = box_walls(extent) if extent is not None and self._tangents.params.meet_box else []
+            walls = meet_at_corners(walls, self._tangents.params, box)
             near = [extent is not None and self._tangents.near_box(w, extent) for w in walls]
             self._cut = self._wall_cuts(self._tangents, [w for w, n in zip(walls, near, strict=True) if not n])
             self._wall_face = self._face_band & ~self._past_slanting_walls(

@@ -18,6 +18,7 @@ are blocked. They are found once, when the run's map is finalised (the explorer 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -66,6 +67,9 @@ class TangentParams(BaseModel):
     # ends of both stretches (or on the other's) and the two meet at corner_min_deg or more.
     corner_reach_m: float = Field(default=0.4, ge=0.0)
     corner_min_deg: float = Field(default=15.0, gt=0.0, le=90.0)
+    # ... or meets an edge of the room's surveyed box (when the map size is known): a room that is
+    # not a box touches it at vertices, where the walls leaving them stopped short.
+    meet_box: bool = True
 
 
 def _off(theta: float, axes: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -130,15 +134,23 @@ class Line:
         return past & (along >= self.s0 - half) & (along <= self.s1 + half)
 
 
-def meet_at_corners(lines: list[Line], params: TangentParams) -> list[Line]:
-    """``lines`` with each stretch extended to where it meets another line (see ``TangentParams``),
-    never shortened."""
+def box_walls(extent: tuple[float, float, float, float]) -> list[Line]:
+    """The four edges of the room box ``extent`` (min x, min y, max x, max y) as walls, each
+    touched along its whole length."""
+    min_x, min_y, max_x, max_y = extent
+    edges = ((0.0, max_x), (math.pi / 2, max_y), (math.pi, -min_x), (-math.pi / 2, -min_y))
+    return [Line(theta, d, -math.inf, math.inf, 0, 0.0) for theta, d in edges]
+
+
+def meet_at_corners(lines: list[Line], params: TangentParams, walls: Sequence[Line] = ()) -> list[Line]:
+    """``lines`` with each stretch extended to where it meets another line, or one of ``walls``
+    (known walls that are not extended themselves; see ``TangentParams``), never shortened."""
     reach = params.corner_reach_m
     min_sin = math.sin(math.radians(params.corner_min_deg))
     out = []
     for a in lines:
         s0, s1 = a.s0, a.s1
-        for b in lines:
+        for b in [*lines, *walls]:
             det = math.sin(b.theta - a.theta)
             if b is a or abs(det) < min_sin:
                 continue
@@ -242,9 +254,7 @@ class TangentLines:
 
     def near_box(self, line: Line, extent: tuple[float, float, float, float]) -> bool:
         """Whether ``line`` is one of the room box's own walls (the map already has those)."""
-        min_x, min_y, max_x, max_y = extent
-        edges = ((0.0, max_x), (math.pi / 2, max_y), (math.pi, -min_x), (-math.pi / 2, -min_y))
-        return any(self._same(line, Line(theta, d, 0.0, 0.0, 0, 0.0)) for theta, d in edges)
+        return any(self._same(line, edge) for edge in box_walls(extent))
 
     def _best_turn(
         self, theta: float, d: float, free: NDArray[np.bool_]
