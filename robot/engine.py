@@ -59,15 +59,20 @@ class EngineStats:
     actions: dict[str, int] = field(default_factory=dict)
 
 
-def classify(belief: NDArray[np.int8], start_cell: tuple[int, int]) -> NDArray[np.int8]:
+def classify(
+    belief: NDArray[np.int8], start_cell: tuple[int, int], passages: NDArray[np.bool_] | None = None
+) -> NDArray[np.int8]:
     """The exported map: the belief read the way the ground truth is defined (SPEC §2).
 
     White = believed-free cells reachable from the start; black = cells that are not believed free
     and touch that area (occupied, or unknown next to explored space, which is treated as blocked);
-    grey = everything else.
+    grey = everything else. ``passages`` (cells the robot drove into against the map) connect the
+    area even when the belief holds them occupied: echo arcs smeared across a narrow gap the robot
+    drove through do not cut off what lies beyond it; they stay black themselves.
     """
     blocked = belief != 0
-    reach = reachable_cells(blocked, *start_cell)
+    passage = blocked if passages is None else blocked & ~passages
+    reach = reachable_cells(passage, *start_cell) & ~blocked
     return truth_states(blocked, reach)
 
 
@@ -100,7 +105,9 @@ class SlamEngine:
         self.recorder = recorder
         self.pilot = Pilot(hw, robot, self.dead_reckoning, config.motion, on_tick=self._on_tick, recorder=recorder)
         block = config.nav_block(robot)
-        self.explorer = Explorer(frame.grid, block, (0, 0), max_inspections=config.max_inspections)
+        self.explorer = Explorer(
+            frame.grid, block, (0, 0), max_inspections=config.max_inspections, max_probes=config.max_probes
+        )
         self.explorer.start_cell = self.explorer.nav_cell_of(frame.start.x, frame.start.y)
         self.stats = EngineStats(last_change_t=hw.now())
         self._last_change_step = 0  # the step at which the belief last changed
@@ -185,7 +192,7 @@ class SlamEngine:
             # grey in the export (not reachable from the start) while the robot maps it.
             self.stats.last_change_t = self.hw.now()
             self._last_change_step = self.stats.steps
-            exported = classify(belief, self.frame.start_cell)
+            exported = classify(belief, self.frame.start_cell, self.explorer.passages())
         self._belief = belief
         self._free_fraction = self.mapper.free_fraction()
         self._passable = self._free_fraction >= self.explorer.min_free_fraction
@@ -220,7 +227,24 @@ class SlamEngine:
             return False
         if self.explorer.frontier(self._belief, self._passable, self._doubtful()).any():
             return False
+        if self._probe_left():
+            return False
         return self._settled(self.config.give_up_steps) or not lone_occupied(self._belief).any()
+
+    def _probe_cells(self) -> NDArray[np.bool_]:
+        """Occupied cells inside the room box that only echoes say are occupied: cells the robot has
+        bumped into are its explorer's ``bumped``."""
+        return (self._belief == OCCUPIED) & ~self._outside
+
+    def _probe_left(self) -> bool:
+        """Whether the explorer would still drive into a cell that echoes alone close off."""
+        est = self.pose
+        current = self.explorer.nav_cell_of(est.x, est.y)
+        if not (0 <= current[0] < self.explorer.nav_rows and 0 <= current[1] < self.explorer.nav_cols):
+            return False
+        trav = self.explorer.traversable(self._free_fraction)
+        trav[current] = True
+        return self.explorer.probe(current, trav, self._probe_cells(), self._free_fraction) is not None
 
     def _doubtful(self) -> NDArray[np.bool_] | None:
         """Occupied cells (not the room's surveyed wall) that touch unknown space: worth a closer look."""
@@ -233,7 +257,7 @@ class SlamEngine:
         """Let the mapper settle every piece of evidence once more; returns the cells that changed."""
         self.mapper.finalize()
         self._belief = self.mapper.states()
-        exported = classify(self._belief, self.frame.start_cell)
+        exported = classify(self._belief, self.frame.start_cell, self.explorer.passages())
         changed = np.nonzero(exported != self._exported) if exported is not self._exported else _NO_CELLS
         self._exported = exported
         return changed[0].astype(np.int64), changed[1].astype(np.int64), exported[changed]
@@ -278,7 +302,7 @@ class SlamEngine:
         action: Action = self.explorer.decide(
             current, est.theta, self._belief, self._passable, self._free_fraction, self._doubtful(),
             seek_frontier=self._settled(self.config.seek_frontier_steps),
-            give_up_closed=self._settled(self.config.give_up_steps),
+            give_up_closed=self._settled(self.config.give_up_steps), probe_cells=self._probe_cells(),
         )  # fmt: skip
         self.stats.actions[action.reason] = self.stats.actions.get(action.reason, 0) + 1
         ok = True

@@ -59,6 +59,10 @@ class Explorer:
     given_up: set[tuple[int, int]] = field(default_factory=set)
     max_escapes: int = 5  # times a robot boxed in by its own map may retry the cells it has stood in
     escapes: int = 0
+    max_probes: int = 8  # drives into a cell the map holds occupied, to find a passage (see ``probe``)
+    probe_min_cells: int = 4  # ... to traversable floor beyond with at least this many navigation cells
+    probe_free_fraction: float = 0.9  # ... seen free over this share
+    probed: set[tuple[int, int]] = field(default_factory=set)
     _around_reach_cache: tuple[tuple[NDArray[np.bool_], tuple[int, int]], NDArray[np.bool_]] | None = field(
         default=None, init=False, repr=False, compare=False
     )
@@ -139,6 +143,15 @@ class Explorer:
             self._around_reach_cache = cached
         return cached[1]
 
+    def passages(self) -> NDArray[np.bool_]:
+        """Map cells of the navigation cells the robot has probed (see ``probe``) and driven into."""
+        b = self.block
+        through = np.zeros_like(self.visited)
+        for cell in self.probed:
+            through[cell] = self.visited[cell] and not self.bumped[cell]
+        full = np.repeat(np.repeat(through, b, axis=0), b, axis=1)
+        return full[: self.grid.rows, : self.grid.cols]
+
     def _visited_map_cells(self) -> NDArray[np.bool_]:
         b = self.block
         full = np.repeat(np.repeat(self.visited, b, axis=0), b, axis=1)
@@ -160,6 +173,7 @@ class Explorer:
         doubtful: NDArray[np.bool_] | None = None,
         seek_frontier: bool = False,
         give_up_closed: bool = False,
+        probe_cells: NDArray[np.bool_] | None = None,
     ) -> Action:
         """The next action from navigation cell ``current`` facing ``heading_rad``.
 
@@ -167,6 +181,7 @@ class Explorer:
         unvisited cell next to the frontier, or else look from the nearest visited one, instead of
         walking on depth-first through explored floor. ``give_up_closed`` as well (the map has been
         settled for longer): when no cell beside the frontier can be reached, give the frontier up.
+        ``probe_cells``: occupied map cells that only echoes say are occupied (see ``probe``).
         """
         self.visited[current] = True
         trav = self.traversable(free_fraction)
@@ -204,7 +219,7 @@ class Explorer:
             # The stack entry is no longer adjacent (after a detour): plan a path to it instead.
             self.stack.append(prev)
             break
-        return self._plan(current, trav, states, passable, doubtful)
+        return self._plan(current, trav, states, passable, free_fraction, doubtful, probe_cells)
 
     def _plan(
         self,
@@ -212,7 +227,9 @@ class Explorer:
         trav: NDArray[np.bool_],
         states: NDArray[np.int8],
         passable: NDArray[np.bool_],
+        free_fraction: NDArray[np.float64],
         doubtful: NDArray[np.bool_] | None = None,
+        probe_cells: NDArray[np.bool_] | None = None,
     ) -> Action:
         """Breadth-first search over traversable cells for the nearest useful goal."""
         front = self.frontier(states, passable, doubtful)
@@ -227,9 +244,102 @@ class Explorer:
                 self.escapes += 1
         if action is not None:
             return action
+        if probe_cells is not None:
+            goal = self.probe(current, trav, probe_cells, free_fraction)
+            if goal is not None:
+                step, cell = goal
+                if step == cell:
+                    self.probed.add(cell)
+                return Action("move", step, reason="probe")
         # Nothing reachable is left to do: frontier cells nobody can get next to are given up.
         self.given_up.update(zip(*np.nonzero(front), strict=True))
         return Action("done", reason="complete")
+
+    def probe(
+        self,
+        current: tuple[int, int],
+        trav: NDArray[np.bool_],
+        probe_cells: NDArray[np.bool_],
+        free_fraction: NDArray[np.float64],
+    ) -> tuple[tuple[int, int], tuple[int, int]] | None:
+        """A navigation cell to drive into although the map holds it occupied, and the first step
+        towards it (the cell itself when the robot stands beside it); None when there is none.
+
+        Sonar arcs smear across a gap a little wider than the robot (between furniture and a
+        doorway's jamb, say) and close it in the map, while the floor beyond has been seen free. A
+        cell qualifies when the robot can reach a cell beside it, only echoes hold it occupied
+        (``probe_cells``: no bump, nothing past the room box; the rest of it is not occupied), it has
+        not been probed, and the cell
+        beyond it in the same straight line is traversable but cannot be reached, and joins at least
+        ``probe_min_cells`` such cells (more than a pocket behind furniture). Driving in either
+        arrives (the body clears the cell) or stalls (the cell is marked bumped); at most
+        ``max_probes`` a run, nearest first."""
+        if len(self.probed) >= self.max_probes or not probe_cells.any():
+            return None
+        b = self.block
+        shape = (self.nav_rows * b, self.nav_cols * b)
+        echoed = np.zeros(shape, dtype=bool)
+        echoed[: self.grid.rows, : self.grid.cols] = probe_cells
+        clear = np.zeros(shape, dtype=bool)  # past the grid counts as wall
+        clear[: self.grid.rows, : self.grid.cols] = probe_cells | (free_fraction >= 0.0)
+        by_nav = (self.nav_rows, b, self.nav_cols, b)
+        has_probe = np.logical_and(echoed.reshape(by_nav).any(axis=(1, 3)), clear.reshape(by_nav).all(axis=(1, 3)))
+        nothing = np.zeros_like(self.visited)
+        no_goal = np.zeros(self.grid.shape, dtype=bool)
+        # Where the robot can drive to (in breadth-first order: nearest first), and where it could
+        # get to through cells it has stood in as well (one it probed may still hold echoes).
+        _, reached = self._search(current, trav, no_goal, relaxed=False, seek_in=nothing)
+        _, known = self._search(current, trav | self.visited, no_goal, relaxed=True, seek_in=nothing)
+        padded = np.full(shape, -1.0)
+        padded[: self.grid.rows, : self.grid.cols] = free_fraction
+        blocks = padded.reshape(by_nav)
+        seen_free = (blocks.min(axis=(1, 3)) >= 0.0) & (blocks.mean(axis=(1, 3)) >= self.probe_free_fraction)
+        for cell in reached:
+            for d in CLOCKWISE[::2]:
+                p = (cell[0] + d[0], cell[1] + d[1])
+                q = (cell[0] + 2 * d[0], cell[1] + 2 * d[1])
+                if not (0 <= q[0] < self.nav_rows and 0 <= q[1] < self.nav_cols):
+                    continue
+                if trav[p] or self.bumped[p] or p in self.probed or not has_probe[p]:
+                    continue
+                if not trav[q] or q in known or not self._floor_beyond(trav, seen_free, q, known):
+                    continue
+                step = p
+                if cell != current:
+                    step = cell
+                    while reached[step] != current:
+                        step = reached[step]
+                return step, p
+        return None
+
+    def _floor_beyond(
+        self,
+        trav: NDArray[np.bool_],
+        seen_free: NDArray[np.bool_],
+        start: tuple[int, int],
+        reached: dict[tuple[int, int], tuple[int, int]],
+    ) -> bool:
+        """Whether the traversable cells joined to ``start`` that the robot cannot reach hold at
+        least ``probe_min_cells`` cells ``seen_free``: more than a pocket behind furniture, or a strip
+        of the room box's face outside a room that is not a box."""
+        seen = {start}
+        queue = deque([start])
+        count = int(seen_free[start])
+        while queue and count < self.probe_min_cells:
+            cell = queue.popleft()
+            for d in CLOCKWISE[::2]:
+                nxt = (cell[0] + d[0], cell[1] + d[1])
+                if (
+                    0 <= nxt[0] < self.nav_rows
+                    and 0 <= nxt[1] < self.nav_cols
+                    and nxt not in seen
+                    and nxt not in reached
+                    and trav[nxt]
+                ):
+                    seen.add(nxt)
+                    queue.append(nxt)
+                    count += int(seen_free[nxt])
+        return count >= self.probe_min_cells
 
     def _cut_off(self, reached: Iterable[tuple[int, int]]) -> bool:
         """Whether a search reached fewer than half of the cells the robot has stood in."""
@@ -242,7 +352,7 @@ class Explorer:
         front: NDArray[np.bool_],
         relaxed: bool,
         seek_in: NDArray[np.bool_] | None = None,
-    ) -> tuple[Action | None, Iterable[tuple[int, int]]]:
+    ) -> tuple[Action | None, dict[tuple[int, int], tuple[int, int]]]:
         """The first step towards the nearest goal (None when no goal is reachable), and the cells
         the search reached. The goals are unvisited cells, the top of the backtracking stack and
         visited cells next to the frontier (to look from); with ``seek_in``, only the cells of

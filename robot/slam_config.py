@@ -47,6 +47,11 @@ class SlamConfig(BaseModel):
     # them can be reached from, and take a black cell alone in free floor that the sweeps have not
     # cleared for a chair leg, rather than walk on through the rest of the room to the time limit.
     give_up_steps: int = Field(default=300, ge=1)
+    # When nothing else is left, drive into a cell that only echoes hold occupied where the floor
+    # straight beyond it has been seen free but cannot be reached: sonar arcs close a gap a little
+    # wider than the robot (furniture beside a doorway). It arrives, or stalls and marks the cell
+    # bumped. At most this many a run (0: never).
+    max_probes: int = Field(default=8, ge=0)
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()

@@ -280,6 +280,26 @@ def test_classify_reads_the_belief_like_the_ground_truth() -> None:
     assert np.array_equal(exported, expected)
 
 
+def test_cells_the_robot_drove_into_against_the_map_connect_the_exported_map_and_stay_black() -> None:
+    """Echo arcs smeared across a narrow gap leave it occupied in the belief after the robot has
+    driven through; the room beyond is still reachable."""
+    belief = np.array(
+        [
+            [FREE, OCCUPIED, FREE, FREE],
+            [FREE, OCCUPIED, FREE, FREE],
+            [FREE, OCCUPIED, FREE, FREE],
+        ],
+        dtype=np.int8,
+    )
+    cut_off = classify(belief, (1, 0))
+    assert (cut_off[:, 2:] == UNKNOWN).all()
+    passages = np.zeros(belief.shape, dtype=bool)
+    passages[1, 1] = True  # the robot drove through the gap at (1, 1)
+    exported = classify(belief, (1, 0), passages)
+    assert (exported[:, 2:] == FREE).all() and (exported[:, 0] == FREE).all()
+    assert (exported[:, 1] == OCCUPIED).all()
+
+
 # -- exploration -------------------------------------------------------------------------------
 def test_neighbours_are_tried_clockwise_starting_from_the_heading() -> None:
     grid = GridSpec(0.0, 0.0, 0.2, 5, 5)
@@ -406,6 +426,77 @@ def test_a_settled_map_gives_up_unknown_cells_it_has_closed_off_instead_of_walki
     boxed.bumped[2, 1] = False
     boxed.decide((2, 1), 0.0, states, passable, free_fraction, seek_frontier=True, give_up_closed=True)
     assert not boxed.given_up
+
+
+def test_a_cell_only_echoes_hold_occupied_is_probed_when_free_floor_lies_beyond_it() -> None:
+    """Row 2 runs from the explored room (columns 0-1) through a gap at (2, 2) that echoes closed,
+    on to floor seen free beyond (columns 3-5), walled off everywhere else."""
+    grid = GridSpec(0.0, 0.0, 0.2, 5, 6)
+    free_fraction = np.full(grid.shape, -1.0)
+    free_fraction[:, 0:2] = 1.0
+    free_fraction[2, 3:6] = 1.0
+    states = np.where(free_fraction >= 0.0, FREE, OCCUPIED).astype(np.int8)
+    passable = states == FREE
+    echoed = states == OCCUPIED  # nothing bumped, nothing past the room box
+    explorer = Explorer(grid, 1, (2, 0), probe_min_cells=3)
+    explorer.visited[:, 0:2] = True
+    trav = explorer.traversable(free_fraction)
+    # Three cells beyond are a pocket behind furniture by default, a room to probe for at 3.
+    assert Explorer(grid, 1, (2, 0)).probe_min_cells > 3
+    assert Explorer(grid, 1, (2, 0)).probe((2, 1), trav, echoed, free_fraction) is None
+    # From beside the gap: drive into it. From (0, 0): first a step towards (2, 1), beside it.
+    assert explorer.probe((2, 1), trav, echoed, free_fraction) == ((2, 2), (2, 2))
+    assert explorer.probe((0, 0), trav, echoed, free_fraction) == ((1, 1), (2, 2))
+    action = explorer.decide((2, 1), 0.0, states, passable, free_fraction, probe_cells=echoed)
+    assert action.kind == "move" and action.target == (2, 2) and action.reason == "probe"
+    assert explorer.probed == {(2, 2)}
+    assert not explorer.passages().any()  # not until the robot is in it
+    explorer.visited[2, 2] = True
+    assert explorer.passages()[2, 2] and explorer.passages().sum() == 1
+    # Once probed (or bumped), or where a bump or the room box holds it, or with probes spent,
+    # there is nothing to probe, and the run is done.
+    assert explorer.probe((2, 1), trav, echoed, free_fraction) is None
+    for change in ("bumped", "not_echoed", "spent"):
+        other = Explorer(grid, 1, (2, 0), max_probes=0 if change == "spent" else 8, probe_min_cells=3)
+        other.visited[:, 0:2] = True
+        cells = echoed.copy()
+        if change == "bumped":
+            other.bumped[2, 2] = True
+        if change == "not_echoed":
+            cells[2, 2] = False
+        assert other.probe((2, 1), other.traversable(free_fraction), cells, free_fraction) is None
+        done = other.decide((2, 1), 0.0, states, passable, free_fraction, probe_cells=cells)
+        assert done.kind == "done"
+    # Floor beyond that the robot can already reach (here round by rows 3-4) is no reason to probe.
+    free_fraction[3:5, :] = 1.0
+    reachable = Explorer(grid, 1, (2, 0), probe_min_cells=3)
+    assert reachable.probe((2, 1), reachable.traversable(free_fraction), echoed, free_fraction) is None
+
+
+def test_a_doorway_narrowed_by_furniture_is_probed_and_the_room_beyond_mapped() -> None:
+    """A partition's 95 cm doorway, a desk leaving 37.5 cm of it: echo arcs closed the gap in the
+    map, and the run ended with the room beyond unseen (F1 0.38)."""
+    world = world_from_dict(
+        {
+            "name": "narrowed-door",
+            "boundary": [[6.7, 0.0], [6.7, 3.8], [0.0, 3.8], [0.0, 0.0]],
+            "start": {"x": 2.7, "y": 2.3, "theta_deg": -90.0},
+            "obstacles": [
+                {"shape": "rect", "center": [3.5, 0.9], "size": [0.1, 1.8]},
+                {"shape": "rect", "center": [3.5, 3.275], "size": [0.1, 1.05]},
+                {"shape": "rect", "center": [3.8, 2.05], "size": [1.1, 0.65]},
+                {"shape": "rect", "center": [5.05, 2.25], "size": [0.75, 0.65]},
+            ],
+        },
+        "narrowed-door.toml",
+    )
+    cfg = load_run_config()
+    result = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    assert result.terminated_by == "complete"
+    assert result.metrics.f1 >= 0.95
+    # Without probing, the same run leaves the far room grey.
+    cfg_off = load_run_config(None, {"max_probes": 0})
+    assert simulate(world, cfg_off.robot, cfg_off.noise, cfg_off.slam, seed=0).metrics.f1 < 0.6
 
 
 def test_a_far_arm_of_a_large_room_is_mapped_although_the_near_one_settles_long_before() -> None:
