@@ -242,8 +242,7 @@ class SlamEngine:
         current = self.explorer.nav_cell_of(est.x, est.y)
         if not (0 <= current[0] < self.explorer.nav_rows and 0 <= current[1] < self.explorer.nav_cols):
             return False
-        trav = self.explorer.traversable(self._free_fraction)
-        trav[current] = True
+        trav = self.explorer.traversable_at(current, self._free_fraction)
         return self.explorer.probe(current, trav, self._probe_cells(), self._free_fraction) is not None
 
     def _doubtful(self) -> NDArray[np.bool_] | None:

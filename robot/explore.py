@@ -16,6 +16,7 @@ import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -90,18 +91,35 @@ class Explorer:
         row = math.floor((g.origin_y + g.rows * g.resolution - y) / (g.resolution * b))
         return int(row), int(col)
 
+    def _nav_blocks(self, values: NDArray[Any], past_grid: float | bool) -> NDArray[Any]:
+        """Per-map-cell ``values`` as blocks of navigation cells, (nav rows, block, nav cols, block),
+        with ``past_grid`` where a navigation cell reaches past the grid."""
+        b = self.block
+        padded = np.full((self.nav_rows * b, self.nav_cols * b), past_grid, dtype=values.dtype)
+        padded[: self.grid.rows, : self.grid.cols] = values
+        return padded.reshape(self.nav_rows, b, self.nav_cols, b)
+
+    def _map_cells(self, nav: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """The map cells of the navigation cells in ``nav``."""
+        b = self.block
+        full = np.repeat(np.repeat(nav, b, axis=0), b, axis=1)
+        return full[: self.grid.rows, : self.grid.cols]
+
     def traversable(self, free_fraction: NDArray[np.float64]) -> NDArray[np.bool_]:
         """Navigation cells with nothing occupied in them and at least a quarter seen free.
 
         ``free_fraction`` is per map cell, negative where the cell holds an obstacle; cells past the
         grid count as walls.
         """
-        b = self.block
-        padded = np.full((self.nav_rows * b, self.nav_cols * b), -1.0)
-        padded[: self.grid.rows, : self.grid.cols] = free_fraction
-        blocks = padded.reshape(self.nav_rows, b, self.nav_cols, b)
+        blocks = self._nav_blocks(free_fraction, -1.0)
         ok = (blocks.min(axis=(1, 3)) >= 0.0) & (blocks.mean(axis=(1, 3)) >= self.min_free_fraction)
         return ok & ~self.bumped
+
+    def traversable_at(self, current: tuple[int, int], free_fraction: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """``traversable``, with the navigation cell the robot stands in counted in."""
+        trav = self.traversable(free_fraction)
+        trav[current] = True  # the robot is standing in it
+        return trav
 
     # -- decisions -------------------------------------------------------------------------------
     def _can_step(
@@ -145,17 +163,13 @@ class Explorer:
 
     def passages(self) -> NDArray[np.bool_]:
         """Map cells of the navigation cells the robot has probed (see ``probe``) and driven into."""
-        b = self.block
         through = np.zeros_like(self.visited)
         for cell in self.probed:
             through[cell] = self.visited[cell] and not self.bumped[cell]
-        full = np.repeat(np.repeat(through, b, axis=0), b, axis=1)
-        return full[: self.grid.rows, : self.grid.cols]
+        return self._map_cells(through)
 
     def _visited_map_cells(self) -> NDArray[np.bool_]:
-        b = self.block
-        full = np.repeat(np.repeat(self.visited, b, axis=0), b, axis=1)
-        return full[: self.grid.rows, : self.grid.cols]
+        return self._map_cells(self.visited)
 
     def _start_map_cell(self) -> tuple[int, int]:
         b = self.block
@@ -184,8 +198,7 @@ class Explorer:
         ``probe_cells``: occupied map cells that only echoes say are occupied (see ``probe``).
         """
         self.visited[current] = True
-        trav = self.traversable(free_fraction)
-        trav[current] = True  # the robot is standing in it
+        trav = self.traversable_at(current, free_fraction)
         if seek_frontier:
             front = self.frontier(states, passable, doubtful)
             if front.any():
@@ -276,24 +289,21 @@ class Explorer:
         ``max_probes`` a run, nearest first."""
         if len(self.probed) >= self.max_probes or not probe_cells.any():
             return None
-        b = self.block
-        shape = (self.nav_rows * b, self.nav_cols * b)
-        echoed = np.zeros(shape, dtype=bool)
-        echoed[: self.grid.rows, : self.grid.cols] = probe_cells
-        clear = np.zeros(shape, dtype=bool)  # past the grid counts as wall
-        clear[: self.grid.rows, : self.grid.cols] = probe_cells | (free_fraction >= 0.0)
-        by_nav = (self.nav_rows, b, self.nav_cols, b)
-        has_probe = np.logical_and(echoed.reshape(by_nav).any(axis=(1, 3)), clear.reshape(by_nav).all(axis=(1, 3)))
+        # Past the grid counts as wall.
+        echoed = self._nav_blocks(probe_cells, False).any(axis=(1, 3))
+        clear = self._nav_blocks(probe_cells | (free_fraction >= 0.0), False).all(axis=(1, 3))
+        has_probe: NDArray[np.bool_] = np.logical_and(echoed, clear)
         nothing = np.zeros_like(self.visited)
         no_goal = np.zeros(self.grid.shape, dtype=bool)
         # Where the robot can drive to (in breadth-first order: nearest first), and where it could
         # get to through cells it has stood in as well (one it probed may still hold echoes).
         _, reached = self._search(current, trav, no_goal, relaxed=False, seek_in=nothing)
         _, known = self._search(current, trav | self.visited, no_goal, relaxed=True, seek_in=nothing)
-        padded = np.full(shape, -1.0)
-        padded[: self.grid.rows, : self.grid.cols] = free_fraction
-        blocks = padded.reshape(by_nav)
+        blocks = self._nav_blocks(free_fraction, -1.0)
         seen_free = (blocks.min(axis=(1, 3)) >= 0.0) & (blocks.mean(axis=(1, 3)) >= self.probe_free_fraction)
+        beyond = trav.copy()  # traversable cells the robot cannot get to
+        for cell in known:
+            beyond[cell] = False
         for cell in reached:
             for d in CLOCKWISE[::2]:
                 p = (cell[0] + d[0], cell[1] + d[1])
@@ -302,7 +312,7 @@ class Explorer:
                     continue
                 if trav[p] or self.bumped[p] or p in self.probed or not has_probe[p]:
                     continue
-                if not trav[q] or q in known or not self._floor_beyond(trav, seen_free, q, known):
+                if not beyond[q] or not self._floor_beyond(beyond, seen_free, q):
                     continue
                 step = p
                 if cell != current:
@@ -312,34 +322,12 @@ class Explorer:
                 return step, p
         return None
 
-    def _floor_beyond(
-        self,
-        trav: NDArray[np.bool_],
-        seen_free: NDArray[np.bool_],
-        start: tuple[int, int],
-        reached: dict[tuple[int, int], tuple[int, int]],
-    ) -> bool:
-        """Whether the traversable cells joined to ``start`` that the robot cannot reach hold at
-        least ``probe_min_cells`` cells ``seen_free``: more than a pocket behind furniture, or a strip
-        of the room box's face outside a room that is not a box."""
-        seen = {start}
-        queue = deque([start])
-        count = int(seen_free[start])
-        while queue and count < self.probe_min_cells:
-            cell = queue.popleft()
-            for d in CLOCKWISE[::2]:
-                nxt = (cell[0] + d[0], cell[1] + d[1])
-                if (
-                    0 <= nxt[0] < self.nav_rows
-                    and 0 <= nxt[1] < self.nav_cols
-                    and nxt not in seen
-                    and nxt not in reached
-                    and trav[nxt]
-                ):
-                    seen.add(nxt)
-                    queue.append(nxt)
-                    count += int(seen_free[nxt])
-        return count >= self.probe_min_cells
+    def _floor_beyond(self, beyond: NDArray[np.bool_], seen_free: NDArray[np.bool_], start: tuple[int, int]) -> bool:
+        """Whether the cells of ``beyond`` joined to ``start`` hold at least ``probe_min_cells``
+        cells ``seen_free``: more than a pocket behind furniture, or a strip of the room box's face
+        outside a room that is not a box."""
+        joined = reachable_cells(~beyond, *start)
+        return int(np.count_nonzero(joined & seen_free)) >= self.probe_min_cells
 
     def _cut_off(self, reached: Iterable[tuple[int, int]]) -> bool:
         """Whether a search reached fewer than half of the cells the robot has stood in."""
