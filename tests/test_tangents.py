@@ -157,6 +157,34 @@ def test_walls_are_extended_to_the_room_box_they_meet() -> None:
     assert meet_at_corners([slanted], params, box) == [slanted]
 
 
+def test_a_wall_running_towards_the_box_edge_is_extended_to_it() -> None:
+    """A wall a few degrees off a box edge meets it metres away, at a vertex echoes seldom reach:
+    when its stretch ends near the edge and runs towards it, it is run on to the edge."""
+    box = box_walls((-1.0, 0.0, 4.0, 3.0))
+
+    def wall(slope: float, y0: float, x0: float, x1: float) -> Line:
+        """y = y0 + slope * x, with the room above it, touched for x in [x0, x1]."""
+        theta = math.atan2(-1.0, slope)  # the normal points down, out of the room
+        line = Line(theta=theta, d=math.sin(theta) * y0, s0=0.0, s1=0.0, echoes=20, scatter=0.01)
+        ends = sorted(line.along(x, y0 + slope * x) for x in (x0, x1))
+        return replace(line, s0=ends[0], s1=ends[1])
+
+    # y = 0.2 - 0.1 x (5.7 degrees off the bottom edge, which it meets at x = 2), touched for x 0.3-1.3:
+    # the stretch ends 7 cm above the edge and 0.7 m short of it.
+    sloping = wall(-0.1, 0.2, 0.3, 1.3)
+    params = TangentParams(corner_reach_m=0.4, box_approach_m=0.15)
+    (out,) = meet_at_corners([sloping], params, box)
+    assert out.s0 == sloping.s0 and out.s1 == pytest.approx(sloping.along(2.0, 0.0))
+    # Not without the approach rule: the edge lies past corner_reach_m, at 5.7 degrees.
+    assert meet_at_corners([sloping], params.model_copy(update={"box_approach_m": 0.0}), box) == [sloping]
+    # Nor when the stretch ends farther from the edge than box_approach_m (12 cm above it, at x = 0.8).
+    short = wall(-0.1, 0.2, 0.3, 0.8)
+    assert meet_at_corners([short], params.model_copy(update={"box_approach_m": 0.1}), box) == [short]
+    # Nor a wall within near_axis_min_deg of the edge (1 degree: left to the evidence grid).
+    flat = wall(-math.tan(math.radians(1.0)), 0.05, 0.3, 1.3)
+    assert meet_at_corners([flat], params, box) == [flat]
+
+
 def test_a_line_must_run_along_occupied_evidence() -> None:
     fine = GridSpec(0.0, 0.0, 0.05, 40, 40)
     occupied = np.zeros(fine.shape, dtype=bool)

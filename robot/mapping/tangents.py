@@ -70,6 +70,12 @@ class TangentParams(BaseModel):
     # ... or meets an edge of the room's surveyed box (when the map size is known): a room that is
     # not a box touches it at vertices, where the walls leaving them stopped short.
     meet_box: bool = True
+    # A wall whose stretch ends within box_approach_m of the box edge and runs towards it (from
+    # near_axis_min_deg off it) is extended to the edge however far that is: a wall a few degrees
+    # off the edge meets it metres away, at a vertex echoes seldom reach. 85 worlds x 3 seeds: 23
+    # runs up (by up to 0.015), 2 down (0.005 and 0.0025: walls found 3 degrees off), mean F1
+    # 0.9795 -> 0.9799; 0.3 m added 5 up and 2 down.
+    box_approach_m: float = Field(default=0.15, ge=0.0)
 
 
 def _off(theta: float, axes: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -120,6 +126,15 @@ class Line:
         """Where the point lies along the line (s)."""
         return -math.sin(self.theta) * x + math.cos(self.theta) * y
 
+    def depth_at(self, x: float, y: float) -> float:
+        """How far the point (x, y) lies past the line into the wall [m]."""
+        return math.cos(self.theta) * x + math.sin(self.theta) * y - self.d
+
+    def point(self, s: float) -> tuple[float, float]:
+        """The point on the line at ``s`` along it."""
+        c, si = math.cos(self.theta), math.sin(self.theta)
+        return self.d * c - s * si, self.d * si + s * c
+
     def corner_reach(self, half: float) -> float:
         """How far the corners of a cell of side ``2 * half`` reach from its centre across the line."""
         return half * (abs(math.cos(self.theta)) + abs(math.sin(self.theta)))
@@ -147,12 +162,17 @@ def meet_at_corners(lines: list[Line], params: TangentParams, walls: Sequence[Li
     (known walls that are not extended themselves; see ``TangentParams``), never shortened."""
     reach = params.corner_reach_m
     min_sin = math.sin(math.radians(params.corner_min_deg))
+    approach = params.box_approach_m
+    min_approach_sin = math.sin(math.radians(params.near_axis_min_deg))
     out = []
     for a in lines:
         s0, s1 = a.s0, a.s1
         for b in [*lines, *walls]:
+            if b is a:
+                continue
+            known = any(b is w for w in walls)
             det = math.sin(b.theta - a.theta)
-            if b is a or abs(det) < min_sin:
+            if abs(det) < (min_approach_sin if known and approach > 0.0 else min_sin):
                 continue
             # n_a . p = d_a and n_b . p = d_b
             x = (a.d * math.sin(b.theta) - b.d * math.sin(a.theta)) / det
@@ -160,9 +180,17 @@ def meet_at_corners(lines: list[Line], params: TangentParams, walls: Sequence[Li
             sa, sb = a.along(x, y), b.along(x, y)
             if not b.s0 - reach <= sb <= b.s1 + reach:
                 continue
-            if a.s1 < sa <= a.s1 + reach:
+            # How far past each end of the stretch the meeting may lie: a stretch that ends within
+            # box_approach_m of a known wall and runs towards it goes on to it, however far.
+            far0 = far1 = reach if abs(det) >= min_sin else 0.0
+            if known and approach > 0.0:
+                if -b.depth_at(*a.point(a.s1)) <= approach:
+                    far1 = math.inf
+                if -b.depth_at(*a.point(a.s0)) <= approach:
+                    far0 = math.inf
+            if a.s1 < sa <= a.s1 + far1:
                 s1 = max(s1, sa)
-            elif a.s0 - reach <= sa < a.s0:
+            elif a.s0 - far0 <= sa < a.s0:
                 s0 = min(s0, sa)
         out.append(a if (s0, s1) == (a.s0, a.s1) else replace(a, s0=s0, s1=s1))
     return out
