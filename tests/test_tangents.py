@@ -254,6 +254,46 @@ def test_face_cells_past_a_wall_leaning_off_the_box_edge_are_left_to_their_evide
     assert not face_past(leaning(0.04), 0.025, 2.525)
 
 
+def test_the_box_face_is_held_free_only_along_edges_where_echoes_found_a_wall() -> None:
+    """A room that is not a box meets its box at vertices; along those edges the face cells hold its
+    walls. The final map holds the face free along an edge where a wall was found on it, or near
+    where echoes touched it; elsewhere the face cells keep their own evidence."""
+    from robot.config import RobotConfig
+    from robot.mapping.base import MapFrame
+    from robot.mapping.logodds import LogOddsMapper
+    from robot.world import Pose
+
+    extent = (0.0, 0.0, 3.0, 3.0)
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    mapper = LogOddsMapper(MapFrame(grid=grid, start=Pose(1.5, 1.5, 0.0), extent=extent), RobotConfig())
+    assert mapper.params.face_needs_wall and mapper.params.face_min_touches == 2
+    tangents = mapper._tangents
+    assert tangents is not None
+
+    def kept(walls: list[Line], x: float, y: float) -> bool:
+        row, col = mapper.fine.world_to_index(x, y)
+        out = np.zeros(mapper.fine.shape, dtype=bool)
+        out[mapper._inner] = mapper._faces_of_found_edges(extent, walls) & mapper._face_band
+        return bool(out[row, col])
+
+    # Nothing found and no echo: no face is held free.
+    assert not kept([], 0.025, 1.525) and not kept([], 1.525, 0.025)
+    # The left wall found (1 degree and 1 cm off the edge): its whole face is held, no other.
+    left = Line(theta=math.pi + math.radians(1.0), d=0.01, s0=-2.0, s1=-1.0, echoes=40, scatter=0.01)
+    assert kept([left], 0.025, 0.125) and kept([left], 0.025, 2.875)
+    assert not kept([left], 1.525, 0.025) and not kept([left], 2.975, 1.525)
+    # Found 2 degrees off, it is a wall leaning off the edge, not the box's own.
+    leaning = Line(theta=math.pi + math.radians(2.0), d=0.01, s0=-2.0, s1=-1.0, echoes=40, scatter=0.01)
+    assert not kept([leaning], 0.025, 1.525)
+    # Two echoes that touched the bottom edge at x = 1.5 (from 0.5 m above it, looking down) hold
+    # its face within 10 cm of there; one echo does not.
+    tangents.add([1.5], [0.5], [-math.pi / 2], [0.5])
+    assert not kept([], 1.525, 0.025)
+    tangents.add([1.52], [0.5], [-math.pi / 2], [0.5])
+    assert kept([], 1.525, 0.025) and kept([], 1.575, 0.025)
+    assert not kept([], 1.725, 0.025) and not kept([], 0.025, 1.525)
+
+
 def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips() -> None:
     """A generated polygon whose left wall leans 2.4 degrees off the box edge, up to 12 cm inside it:
     the cells it clips were white, their part behind the wall taken for the box wall's face."""

@@ -129,6 +129,10 @@ class Line:
         """Where the point lies along the line (s)."""
         return -math.sin(self.theta) * x + math.cos(self.theta) * y
 
+    def along_many(self, xs: NDArray[np.float64], ys: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Where points lie along the line (s)."""
+        return -math.sin(self.theta) * xs + math.cos(self.theta) * ys
+
     def depth_at(self, x: float, y: float) -> float:
         """How far the point (x, y) lies past the line into the wall [m]."""
         return math.cos(self.theta) * x + math.sin(self.theta) * y - self.d
@@ -282,6 +286,16 @@ class TangentLines:
             abs(math.remainder(a.theta - b.theta, 2 * math.pi)) <= math.radians(p.same_deg)
             and abs(a.d - b.d) <= p.same_m
         )
+
+    def touches(self, line: Line) -> NDArray[np.float64]:
+        """Where along ``line`` the echoes tangent to it (within ``tolerance_m``, inside their cone)
+        touch it, in increasing order."""
+        self._gather()
+        c, s = math.cos(line.theta), math.sin(line.theta)
+        dist = c * self._x + s * self._y + self._r
+        near = (_off(line.theta, self._axis) <= self.half) & (np.abs(dist - line.d) <= self.params.tolerance_m)
+        fx, fy = self._x[near] + self._r[near] * c, self._y[near] + self._r[near] * s
+        return np.sort(-s * fx + c * fy)
 
     def near_box(self, line: Line, extent: tuple[float, float, float, float]) -> bool:
         """Whether ``line`` is one of the room box's own walls (the map already has those)."""
