@@ -273,7 +273,7 @@ def test_the_box_face_is_held_free_only_along_edges_where_echoes_found_a_wall() 
     def kept(walls: list[Line], x: float, y: float) -> bool:
         row, col = mapper.fine.world_to_index(x, y)
         out = np.zeros(mapper.fine.shape, dtype=bool)
-        out[mapper._inner] = mapper._faces_of_found_edges(extent, walls) & mapper._face_band
+        out[mapper._inner] = mapper._faces_of_found_edges(tangents, extent, walls) & mapper._face_band
         return bool(out[row, col])
 
     # Nothing found and no echo: no face is held free.

@@ -514,10 +514,12 @@ class LogOddsMapper:
             box_found = [w for w, n in zip(walls, near, strict=True) if n]
             self._wall_face = self._face_band & ~self._past_slanting_walls(box_found)
             if self.params.face_needs_wall and extent is not None:
-                self._wall_face &= self._faces_of_found_edges(extent, box_found)
+                self._wall_face &= self._faces_of_found_edges(self._tangents, extent, box_found)
             self._changed(occupied=False)
 
-    def _faces_of_found_edges(self, extent: tuple[float, float, float, float], walls: list[Line]) -> NDArray[np.bool_]:
+    def _faces_of_found_edges(
+        self, tangents: TangentLines, extent: tuple[float, float, float, float], walls: list[Line]
+    ) -> NDArray[np.bool_]:
         """Evidence cells of the map's area near a box edge (within ``extent_snap_m``) along which a
         wall was found from echoes (``walls``: within ``face_slant_deg`` and ``face_wall_m`` of the
         edge), or within ``face_touch_window_m`` of where ``face_min_touches`` echoes touched it."""
@@ -535,8 +537,8 @@ class LogOddsMapper:
                 for w in walls
             ):
                 out |= band
-            elif self._tangents is not None and self.params.face_min_touches > 0:
-                touched = self._tangents.touches(edge)
+            elif self.params.face_min_touches > 0:
+                touched = tangents.touches(edge)
                 along = edge.along_many(xs, ys)
                 window = self.params.face_touch_window_m
                 first = np.searchsorted(touched, along - window)

@@ -151,7 +151,7 @@ class Line:
     ) -> NDArray[np.bool_]:
         """Cells (centres ``xs``, ``ys``, side ``2 * half``) that reach ``margin`` or more past the
         line into the wall, along its touched stretch (widened by half a cell)."""
-        along = -math.sin(self.theta) * xs + math.cos(self.theta) * ys
+        along = self.along_many(xs, ys)
         past = self.depth(xs, ys) + self.corner_reach(half) >= margin
         return past & (along >= self.s0 - half) & (along <= self.s1 + half)
 
@@ -174,10 +174,9 @@ def meet_at_corners(lines: list[Line], params: TangentParams, walls: Sequence[Li
     out = []
     for a in lines:
         s0, s1 = a.s0, a.s1
-        for b in [*lines, *walls]:
+        for b, known in [*((line, False) for line in lines), *((wall, True) for wall in walls)]:
             if b is a:
                 continue
-            known = any(b is w for w in walls)
             det = math.sin(b.theta - a.theta)
             if abs(det) < (min_approach_sin if known and approach > 0.0 else min_sin):
                 continue
@@ -294,8 +293,7 @@ class TangentLines:
         c, s = math.cos(line.theta), math.sin(line.theta)
         dist = c * self._x + s * self._y + self._r
         near = (_off(line.theta, self._axis) <= self.half) & (np.abs(dist - line.d) <= self.params.tolerance_m)
-        fx, fy = self._x[near] + self._r[near] * c, self._y[near] + self._r[near] * s
-        return np.sort(-s * fx + c * fy)
+        return np.sort(line.along_many(self._x[near] + self._r[near] * c, self._y[near] + self._r[near] * s))
 
     def near_box(self, line: Line, extent: tuple[float, float, float, float]) -> bool:
         """Whether ``line`` is one of the room box's own walls (the map already has those)."""
