@@ -18,7 +18,6 @@ the edge does.
 from __future__ import annotations
 
 import math
-from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +26,6 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from robot.config import RobotConfig
 from robot.mapping.base import Evidence, MapFrame
 from robot.mapping.geometry import place_beams
-from robot.mapping.tangents import Line, TangentLines, TangentParams
 from robot.world import Pose
 
 
@@ -80,23 +78,6 @@ class BoxFixConfig(BaseModel):
     along_window_m: float = Field(default=0.6, ge=0.0)
     inner_band_m: tuple[float, float] = (0.05, 0.15)
     max_inner_share: float = Field(default=0.08, ge=0.0, le=1.0)
-    # The straight walls that the last slant_sweeps sweeps' echoes agree on, placed by odometry alone
-    # (which the fixes do not shift: they would bend a wall slanting off the edge onto it), say
-    # whether the wall a fix meets runs along the box edge. Near a vertex of a room that is not a
-    # rectangle, a wall a degree or two off the edge stays within the gate for metres. A sonar
-    # reading counts unless the wall through it runs slant_deg or more off the edge (or, with
-    # slant_confirm, unless such a wall within slant_deg shows); a bump, with contact_confirm, only
-    # where one does. 85 worlds x 3 seeds: mean F1 0.9808 -> 0.9815 (45 runs up, 27 down), mean final
-    # position error 2.81 -> 2.55 cm, runs ending more than 10 cm off 9 -> 3, bump fixes 12 -> 0. A
-    # bound of 1 degree scored the same there, but refused good fixes where the heading had drifted
-    # a degree (bigroom walked cell by cell: 90th-percentile position error 3.0 -> 4.7 cm; 2.9 cm
-    # at 1.5 degrees). 0 sweeps turns this off.
-    slant_sweeps: int = Field(default=30, ge=0)
-    slant_deg: float = Field(default=1.5, gt=0.0)
-    slant_min_length_m: float = Field(default=0.6, gt=0.0)
-    slant_min_votes: float = Field(default=12.0, gt=0.0)
-    slant_confirm: bool = False
-    contact_confirm: bool = True
 
     @model_validator(mode="after")
     def _gates(self) -> BoxFixConfig:
@@ -194,69 +175,6 @@ def runs_along_edge(
     return within <= config.max_inner_share * along.size
 
 
-class EdgeSlant:
-    """The straight walls that the last ``slant_sweeps`` sweeps' echoes agree on, placed by odometry
-    alone (the position fixes shift the estimate, and would bend a wall that slants off a box edge
-    onto it), and whether the one through a box fix's reading runs along the edge."""
-
-    _EDGE_NORMALS = (0.0, math.pi, math.pi / 2, -math.pi / 2)  # max x, min x, max y, min y
-    _MATCH_DEG = 5.0  # a wall this close to an edge's direction is the one a reading of it meets ...
-    _REACH_M = 0.3  # ... where the reading lies within this of the stretch its echoes touched
-
-    def __init__(self, robot: RobotConfig, config: BoxFixConfig) -> None:
-        self.robot = robot
-        self.config = config
-        self._half = math.radians(robot.sonar.beam_width_deg) / 2.0
-        self._params = TangentParams(min_votes=config.slant_min_votes, min_length_m=config.slant_min_length_m)
-        self._sweeps: deque[tuple[list[float], list[float], list[float], list[float]]] = deque(
-            maxlen=max(config.slant_sweeps, 1)
-        )
-        self._shift = (0.0, 0.0)
-        self._lines: list[Line] | None = None
-
-    def add(self, odometry: Pose, ranges_m: NDArray[np.float64], shift: tuple[float, float]) -> None:
-        """A sweep taken at ``odometry`` (the pose from odometry alone); ``shift``: the estimate's
-        position minus that one's, now."""
-        beams = [b for b in place_beams(odometry, ranges_m, self.robot) if b.echo]
-        self._sweeps.append(
-            ([b.x for b in beams], [b.y for b in beams], [b.axis_rad for b in beams], [b.range_m for b in beams])
-        )
-        self._shift = shift
-        self._lines = None
-
-    def clear(self) -> None:
-        """Forget the sweeps (the heading was just corrected: the ones before it are turned)."""
-        self._sweeps.clear()
-        self._lines = None
-
-    def turn(self, edge: int, hit: tuple[float, float]) -> float | None:
-        """How far [rad] the wall that the recent echoes show through ``hit`` (on box edge ``edge``,
-        0-3: max x, min x, max y, min y; in the estimate's frame) runs off the edge, or None when
-        they show no wall there."""
-        if self._lines is None:
-            tangents = TangentLines(self._half, self._params)
-            for sweep in self._sweeps:
-                tangents.add(*sweep)
-            self._lines = tangents.lines()
-        normal = self._EDGE_NORMALS[edge]
-        x, y = hit[0] - self._shift[0], hit[1] - self._shift[1]
-        for line in self._lines:
-            turn = abs(math.remainder(line.theta - normal, 2 * math.pi))
-            if turn > math.radians(self._MATCH_DEG) or abs(line.depth_at(x, y)) > self.config.max_gate_m:
-                continue
-            if line.s0 - self._REACH_M <= line.along(x, y) <= line.s1 + self._REACH_M:
-                return turn
-        return None
-
-    def refuses(self, edge: int, hit: tuple[float, float], confirm: bool) -> bool:
-        """Whether a fix from box edge ``edge`` at ``hit`` is refused: the recent echoes show the wall
-        there slanting ``slant_deg`` or more off the edge, or (``confirm``) show no wall there."""
-        turn = self.turn(edge, hit)
-        if turn is None:
-            return confirm
-        return turn >= math.radians(self.config.slant_deg)
-
-
 _SPARE_M = 0.02  # what a fix past the fixed gate leaves to later sweeps, plus this, stays in the gate
 
 
@@ -347,7 +265,6 @@ def box_offsets(
     evidence: Evidence | None = None,
     gate: DriftGate | None = None,
     trusted: tuple[Evidence | None, Evidence | None] | None = None,
-    slant: EdgeSlant | None = None,
 ) -> tuple[float | None, float | None]:
     """The position error (true minus estimated) [m] along x and along y that the box's walls show
     in one sweep (the median over the beams that count), or None for an axis no beam measured.
@@ -358,8 +275,7 @@ def box_offsets(
     ``DriftGate``); without it, it is ``config.gate_m``. ``trusted`` holds, per axis, the map as it
     was at that axis's last fix within ``gate_m``: a reading past that gate that the map so far
     refuses counts when that map shows the edge (the map so far may show the wall where the drifted
-    estimate put it). With ``slant``, a reading counts only where the recent echoes do not show the
-    wall through it slanting off the edge (see ``EdgeSlant``).
+    estimate put it).
     """
     if frame.extent is None or not config.enabled:
         return None, None
@@ -394,10 +310,6 @@ def box_offsets(
                     old = None if trusted is None or abs(offset) <= config.gate_m else trusted[0 if horizontal else 1]
                     if old is None or not map_shows_edge(old, hit, horizontal, outward, foot, config, span):
                         continue
-            if slant is not None and slant.refuses(
-                index, (edge, beam.y) if horizontal else (beam.x, edge), config.slant_confirm
-            ):
-                continue
             if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset):
                 continue
             (dxs if horizontal else dys).append(offset)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from robot.boxfix import BoxFixConfig, DriftGate, EdgeSlant, box_offsets, map_shows_edge
+from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, map_shows_edge
 from robot.config import RobotConfig
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
@@ -157,7 +157,6 @@ class WallFixes:
         self.heading_fixes: list[HeadingFit] = []
         self.contact_fixes = 0
         self.gate = DriftGate(box)
-        self.slant = EdgeSlant(robot, box) if box.slant_sweeps > 0 else None
         self._fixed_at = [0.0, 0.0]  # the odometer at each axis's last fix within the fixed gate [m]
         self._repairs: list[Repair] = []
         self._trusted: list[Evidence | None] = [None, None]  # the map at each axis's last fix within the gate
@@ -165,19 +164,8 @@ class WallFixes:
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
         """The pose after this sweep's fixes (``pose`` itself when there are none)."""
         self.gate.follow(pose.x, pose.y)
-        if self.slant is not None:
-            odo_x, odo_y = dr.odometry_xy
-            self.slant.add(Pose(odo_x, odo_y, pose.theta), ranges_m, (pose.x - odo_x, pose.y - odo_y))
         ox, oy = box_offsets(
-            self.frame,
-            self.robot,
-            pose,
-            ranges_m,
-            self.box,
-            evidence,
-            self.gate,
-            (self._trusted[0], self._trusted[1]),
-            self.slant,
+            self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate, (self._trusted[0], self._trusted[1])
         )
         if ox is None and oy is None:
             return pose
@@ -210,8 +198,6 @@ class WallFixes:
             est = dr.correct_heading(fit.delta_rad, fit.std_rad)
             self.heading.reset()
             self.heading_fixes.append(fit)
-            if self.slant is not None:
-                self.slant.clear()
         return est.as_pose()
 
     def take_repairs(self) -> list[Repair]:
@@ -249,9 +235,6 @@ class WallFixes:
             # The edge solid along the body's support, and the wall on the edge along a stretch, not a
             # wall slanting into it at a vertex.
             if evidence is None or not map_shows_edge(evidence, hit, axis == 0, sign, half, self.box, span, True):
-                continue
-            edge = (0 if sign > 0 else 1) if axis == 0 else (2 if sign > 0 else 3)
-            if self.slant is not None and self.slant.refuses(edge, hit, self.box.contact_confirm):
                 continue
             best = (abs(offset), axis, offset)
         if best is None:

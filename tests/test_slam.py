@@ -701,8 +701,7 @@ def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
     wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in np.arange(0.0, 2.0, 0.05)])
-    # The map's checks alone (the recent echoes' check is tested below).
-    fixes = WallFixes(frame, ROBOT, BoxFixConfig(contact_confirm=False), HeadingFixConfig())
+    fixes = WallFixes(frame, ROBOT, BoxFixConfig(), HeadingFixConfig())
 
     def bump(believed: Pose, direction_deg: float, evidence) -> tuple[Pose, bool, tuple[float, float]]:
         dr = DeadReckoning(ROBOT, believed)
@@ -734,7 +733,7 @@ def test_a_bump_where_a_corner_touches_the_box_edge_is_not_a_box_fix() -> None:
 
     grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
     frame = MapFrame(grid=grid, start=Pose(1.5, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
-    fixes = WallFixes(frame, ROBOT, BoxFixConfig(contact_confirm=False), HeadingFixConfig())
+    fixes = WallFixes(frame, ROBOT, BoxFixConfig(), HeadingFixConfig())
     rising = np.arange(0.0, 1.2, 0.025)
     corner = [(1.5 - t * math.cos(math.radians(20)), t * math.sin(math.radians(20))) for t in rising]
     corner += [(1.5 + t * math.cos(math.radians(25)), t * math.sin(math.radians(25))) for t in rising]
@@ -774,10 +773,10 @@ def test_a_bump_into_a_wall_that_slants_into_the_box_edge_is_not_a_box_fix() -> 
         dr = DeadReckoning(ROBOT, believed)
         return WallFixes(frame, ROBOT, config, HeadingFixConfig()).contact(dr, believed, math.pi, evidence)
 
-    pose, unexplained = bump(BoxFixConfig(contact_confirm=False))
+    pose, unexplained = bump(BoxFixConfig())
     assert unexplained and pose == believed
     # Without the check along the edge, the bump passes for the box wall.
-    pose, unexplained = bump(BoxFixConfig(along_window_m=0.0, contact_confirm=False))
+    pose, unexplained = bump(BoxFixConfig(along_window_m=0.0))
     assert not unexplained and pose.x == pytest.approx(ROBOT.radius_m)
 
 
@@ -865,82 +864,6 @@ def test_box_fixes_ignore_a_wall_that_slants_into_the_box_edge() -> None:
     # Without the check along the edge, the slanting wall passes the test across the footprint.
     unchecked = config.model_copy(update={"along_window_m": 0.0})
     assert _box_fix(frame, ROBOT, believed, ranges, unchecked, slanting)[0] == pytest.approx(0.03, abs=1e-9)
-
-
-def _sweeps_along_a_wall(slope_deg: float, shift: float = 0.0):
-    """Sweeps (odometry pose, ranges) of a robot driving east at y = 1.5 under a wall that meets the
-    north edge of a 3 x 2 m box at x = 0.5 and runs ``slope_deg`` off it, down towards the east; only
-    the north sonar hears it. ``shift`` is added to the estimate's x."""
-    from robot.mapping.geometry import place_beams
-
-    north = next(i for i, m in enumerate(ROBOT.sonars) if m.bearing_deg == 90.0)
-    t = math.tan(math.radians(slope_deg))
-    for x in np.arange(0.5, 2.5, 0.05):
-        pose = Pose(float(x), 1.5, 0.0)
-        ranges = np.full(8, ROBOT.sonar.max_range_m)
-        beam = place_beams(pose, ranges, ROBOT)[north]
-        wall_y = 2.0 - t * (beam.x - 0.5)
-        ranges[north] = (wall_y - beam.y) * math.cos(math.atan(t))  # the foot of the perpendicular
-        yield pose, ranges
-
-
-def test_the_echoes_of_the_last_sweeps_tell_a_wall_along_the_box_edge_from_one_slanting_off_it() -> None:
-    """Near a vertex of a room that is not a rectangle a wall a degree or two off the box edge stays
-    within the fixes' gate for metres: the recent echoes, placed by odometry, show it slanting."""
-    from robot.boxfix import BoxFixConfig, EdgeSlant
-
-    config = BoxFixConfig(slant_sweeps=40, slant_deg=1.0)
-    for slope, refused in ((0.0, False), (0.5, False), (2.0, True)):
-        slant = EdgeSlant(ROBOT, config)
-        for pose, ranges in _sweeps_along_a_wall(slope):
-            slant.add(pose, ranges, (0.0, 0.0))
-        turn = slant.turn(2, (2.0, 2.0))
-        assert turn is not None and math.degrees(turn) == pytest.approx(slope, abs=0.15)
-        assert slant.refuses(2, (2.0, 2.0), confirm=True) is refused
-        # Only the north edge's wall is known: nothing is refused elsewhere but when confirming.
-        assert slant.turn(0, (3.0, 1.0)) is None
-        assert not slant.refuses(0, (3.0, 1.0), confirm=False)
-        assert slant.refuses(0, (3.0, 1.0), confirm=True)
-    # The fixes shift the estimate off the odometry: a reading is placed back by the shift.
-    slant = EdgeSlant(ROBOT, config)
-    for pose, ranges in _sweeps_along_a_wall(2.0):
-        slant.add(pose, ranges, (0.0, 0.1))
-    assert slant.turn(2, (2.0, 2.1)) is not None and slant.turn(2, (2.0, 1.85)) is None
-    # Only the last sweeps count: a wall left behind is forgotten.
-    short = EdgeSlant(ROBOT, BoxFixConfig(slant_sweeps=5))
-    for pose, ranges in _sweeps_along_a_wall(2.0):
-        short.add(pose, ranges, (0.0, 0.0))
-    assert short.turn(2, (2.0, 2.0)) is None
-    slant.clear()
-    assert slant.turn(2, (2.0, 2.1)) is None
-
-
-def test_a_bump_is_a_box_fix_only_where_the_recent_echoes_show_the_wall_along_the_edge() -> None:
-    """A bump is taken for the box wall when the last sweeps' echoes show a wall through the point
-    of contact that runs along the edge: not when they show one slanting off it (a generated polygon
-    ended 17 cm off after a bump into a wall leaning 25 degrees off the edge near a vertex moved the
-    estimate by 13 cm), nor when they show no wall there."""
-    from robot.boxfix import BoxFixConfig
-    from robot.headingfix import HeadingFixConfig, WallFixes
-
-    grid = GridSpec(0.0, 0.0, 0.2, 10, 15)
-    frame = MapFrame(grid=grid, start=Pose(1.0, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 2.0))
-    north = _evidence_with_solid(frame, [(float(x), 2.02) for x in np.arange(0.0, 3.0, 0.05)])
-    believed = Pose(2.0, 2.0 - ROBOT.radius_m - 0.08, math.pi / 2)  # 8 cm short of the north edge
-
-    def bump(slope_deg: float | None) -> tuple[Pose, bool]:
-        fixes = WallFixes(frame, ROBOT, BoxFixConfig(slant_sweeps=40, contact_confirm=True), HeadingFixConfig())
-        assert fixes.slant is not None
-        if slope_deg is not None:
-            for pose, ranges in _sweeps_along_a_wall(slope_deg):
-                fixes.slant.add(pose, ranges, (0.0, 0.0))
-        return fixes.contact(DeadReckoning(ROBOT, believed), believed, math.pi / 2, north)
-
-    pose, unexplained = bump(0.0)
-    assert not unexplained and pose.y == pytest.approx(2.0 - ROBOT.radius_m)
-    for refused in (2.0, None):
-        pose, unexplained = bump(refused)
-        assert unexplained and pose == believed
 
 
 def test_the_box_fix_gate_grows_with_the_distance_driven_since_the_last_fix() -> None:

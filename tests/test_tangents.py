@@ -296,9 +296,7 @@ def test_the_box_face_is_held_free_only_along_edges_where_echoes_found_a_wall() 
 
 def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips() -> None:
     """A generated polygon whose left wall leans 2.4 degrees off the box edge, up to 12 cm inside it:
-    the cells it clips were white, their part behind the wall taken for the box wall's face. (Seed 1:
-    since the box fixes need the recent echoes to show the wall along the edge, seed 0 takes a path
-    on which the rule changes no cell.)"""
+    the cells it clips were white, their part behind the wall taken for the box wall's face."""
     from robot.runner import simulate
     from robot.settings import load_run_config
     from robot.world import world_from_dict
@@ -317,8 +315,8 @@ def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips() -> N
     )
     cfg = load_run_config()
     off = cfg.slam.model_copy(update={"logodds": cfg.slam.logodds.model_copy(update={"face_slant_deg": 45.0})})
-    kept = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=1)
-    lost = simulate(world, cfg.robot, cfg.noise, off, seed=1)
+    kept = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    lost = simulate(world, cfg.robot, cfg.noise, off, seed=0)
     assert kept.trajectory == lost.trajectory  # only the final map changes
     assert kept.metrics.recall > lost.metrics.recall
     assert kept.metrics.f1 > lost.metrics.f1
