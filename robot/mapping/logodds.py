@@ -531,11 +531,7 @@ class LogOddsMapper:
         out = np.zeros(self._face_band.shape, dtype=bool)
         slant = math.radians(self.params.face_slant_deg)
         for edge, band in zip(box_walls(extent), bands, strict=True):
-            if any(
-                abs(math.remainder(w.theta - edge.theta, 2 * math.pi)) <= slant
-                and abs(w.d - edge.d) <= self.params.face_wall_m
-                for w in walls
-            ):
+            if any(w.near(edge, slant, self.params.face_wall_m) for w in walls):
                 out |= band
             elif self.params.face_min_touches > 0:
                 touched = tangents.touches(edge)

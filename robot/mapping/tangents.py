@@ -142,6 +142,14 @@ class Line:
         c, si = math.cos(self.theta), math.sin(self.theta)
         return self.d * c - s * si, self.d * si + s * c
 
+    def near(self, other: Line, turn_rad: float, distance_m: float) -> bool:
+        """Whether ``other`` runs within ``turn_rad`` of this line's direction and ``distance_m`` of
+        its distance from the origin."""
+        return (
+            abs(math.remainder(self.theta - other.theta, 2 * math.pi)) <= turn_rad
+            and abs(self.d - other.d) <= distance_m
+        )
+
     def corner_reach(self, half: float) -> float:
         """How far the corners of a cell of side ``2 * half`` reach from its centre across the line."""
         return half * (abs(math.cos(self.theta)) + abs(math.sin(self.theta)))
@@ -280,11 +288,7 @@ class TangentLines:
             np.subtract.at(acc, (base[near] + 1).ravel(), frac[near].ravel())
 
     def _same(self, a: Line, b: Line) -> bool:
-        p = self.params
-        return (
-            abs(math.remainder(a.theta - b.theta, 2 * math.pi)) <= math.radians(p.same_deg)
-            and abs(a.d - b.d) <= p.same_m
-        )
+        return a.near(b, math.radians(self.params.same_deg), self.params.same_m)
 
     def touches(self, line: Line) -> NDArray[np.float64]:
         """Where along ``line`` the echoes tangent to it (within ``tolerance_m``, inside their cone)
