@@ -69,6 +69,12 @@ class BoxFixConfig(BaseModel):
     # corner on a box edge, echo arcs smear the corner along the edge over about the body's width,
     # and a bump into either wall, short of the edge, was taken for the box wall.
     contact_support_m: float = Field(default=0.5, ge=0.0)
+    # ... and only within the drift that the distance driven since the axis's last fix allows (the
+    # sonar fixes' gate, ``DriftGate``), plus contact_spare_m. Just after a fix the estimate is
+    # within centimetres across the wall; a bump 10-15 cm short of the box edge then is a wall of a
+    # room that is not a rectangle, near a vertex on the edge, and taking it for the box wall moved
+    # the estimate by as much (a generated polygon ended 17 cm off).
+    contact_spare_m: float = Field(default=0.02, ge=0.0)
     # The map must show the wall on the edge along +-along_window_m (clipped to the box), not a
     # wall that comes close to it: in a room that is not a rectangle, a wall a few degrees off an
     # axis meets the box edge at a vertex, and near it passes the footprint check a few centimetres

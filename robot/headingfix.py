@@ -210,11 +210,12 @@ class WallFixes:
         self, dr: DeadReckoning, pose: Pose, direction_rad: float, evidence: Evidence | None
     ) -> tuple[Pose, bool]:
         """A bump while driving along ``direction_rad``. When the body would touch a box wall ahead
-        within ``contact_gate_m`` of where the estimate puts it, and the map shows that edge as a
-        wall there and along a stretch of it (in a room that is not a rectangle an angled wall may
-        meet the box edge), the bump was that wall: it fixes the position across the wall, and needs
-        no contact evidence. Returns the pose and whether the bump should still be marked on the
-        map."""
+        within ``contact_gate_m`` of where the estimate puts it, and within the drift that the
+        distance driven since that axis's last fix allows (``DriftGate``, plus ``contact_spare_m``),
+        and the map shows that edge as a wall there and along a stretch of it (in a room that is not
+        a rectangle an angled wall may meet the box edge), the bump was that wall: it fixes the
+        position across the wall, and needs no contact evidence. Returns the pose and whether the
+        bump should still be marked on the map."""
         gate = self.box.contact_gate_m
         if self.frame.extent is None or not self.box.enabled or gate <= 0.0:
             return pose, True
@@ -228,7 +229,8 @@ class WallFixes:
             if sign * along[axis] < head_on:
                 continue
             offset = (edge - sign * radius) - (pose.x, pose.y)[axis]  # the body touching the wall
-            if abs(offset) > gate or (best is not None and abs(offset) >= best[0]):
+            drift = self.gate.limit(axis) + self.box.contact_spare_m
+            if abs(offset) > min(gate, drift) or (best is not None and abs(offset) >= best[0]):
                 continue
             hit = (edge, pose.y) if axis == 0 else (pose.x, edge)
             span = (min_y, max_y) if axis == 0 else (min_x, max_x)

@@ -694,6 +694,13 @@ def test_a_heading_fix_corrects_the_filter_and_odometry_ignores_position_fixes()
     assert (after.x, after.y) == pytest.approx((before.x + 0.05, before.y - 0.02))
 
 
+def _driven(fixes, metres: float) -> None:
+    """Let ``fixes`` follow the estimate over ``metres`` of driving with no fix: the drift a bump
+    may correct grows with it (``DriftGate``)."""
+    fixes.gate.follow(0.0, 0.0, drove=False)
+    fixes.gate.follow(metres, 0.0)
+
+
 def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
     from robot.boxfix import BoxFixConfig
     from robot.headingfix import HeadingFixConfig, WallFixes
@@ -708,12 +715,16 @@ def test_a_bump_into_a_box_wall_fixes_the_position_across_it() -> None:
         pose, unexplained = fixes.contact(dr, believed, math.radians(direction_deg), evidence)
         return pose, unexplained, (dr.estimate.x, dr.estimate.y)
 
-    # The estimate puts the body 10 cm short of the east wall when it touches it: the wall is right.
+    # After 10 m without a fix, the estimate puts the body 10 cm short of the east wall when it
+    # touches it: the wall is right.
+    _driven(fixes, 10.0)
     pose, unexplained, xy = bump(Pose(2.0 - ROBOT.radius_m - 0.10, 1.0, 0.0), 0.0, wall)
     assert not unexplained and xy == pytest.approx((2.0 - ROBOT.radius_m, 1.0))
     assert (pose.x, pose.y) == pytest.approx(xy)
     # Diagonally into the same wall still counts; driving along it, or far from it, does not.
+    _driven(fixes, 10.0)
     assert not bump(Pose(1.85, 1.0, 0.0), -45.0, wall)[1]
+    _driven(fixes, 10.0)
     assert bump(Pose(1.85, 1.0, 0.0), 80.0, wall)[1]
     assert bump(Pose(1.5, 1.0, 0.0), 0.0, wall)[1]
     # Where the map does not show the box edge as a wall (a corner of an angled wall may touch
@@ -739,6 +750,7 @@ def test_a_bump_where_a_corner_touches_the_box_edge_is_not_a_box_fix() -> None:
     corner += [(1.5 + t * math.cos(math.radians(25)), t * math.sin(math.radians(25))) for t in rising]
     corner += [(float(x), -0.01) for x in np.arange(1.35, 1.66, 0.05)]  # the smear at the corner
     believed = Pose(1.55, ROBOT.radius_m + 0.08, 0.0)  # 8 cm short of touching the box edge
+    _driven(fixes, 10.0)  # far enough for 8 cm of drift
     dr = DeadReckoning(ROBOT, believed)
     pose, unexplained = fixes.contact(dr, believed, math.radians(-90.0), _evidence_with_solid(frame, corner))
     assert unexplained and pose == believed and (dr.estimate.x, dr.estimate.y) == (believed.x, believed.y)
@@ -771,13 +783,47 @@ def test_a_bump_into_a_wall_that_slants_into_the_box_edge_is_not_a_box_fix() -> 
 
     def bump(config: BoxFixConfig) -> tuple[Pose, bool]:
         dr = DeadReckoning(ROBOT, believed)
-        return WallFixes(frame, ROBOT, config, HeadingFixConfig()).contact(dr, believed, math.pi, evidence)
+        fixes = WallFixes(frame, ROBOT, config, HeadingFixConfig())
+        _driven(fixes, 10.0)  # far enough for 8 cm of drift
+        return fixes.contact(dr, believed, math.pi, evidence)
 
     pose, unexplained = bump(BoxFixConfig())
     assert unexplained and pose == believed
     # Without the check along the edge, the bump passes for the box wall.
     pose, unexplained = bump(BoxFixConfig(along_window_m=0.0))
     assert not unexplained and pose.x == pytest.approx(ROBOT.radius_m)
+
+
+def test_a_bump_corrects_no_more_drift_than_the_distance_driven_since_the_last_fix_allows() -> None:
+    """Just after a fix the estimate is within centimetres across the wall: a bump 10-15 cm short of
+    the box edge then is some other wall (near a vertex of a room that is not a rectangle), and
+    taking it for the box wall moved the estimate by as much (a generated polygon ended 17 cm off).
+    The bound is the sonar fixes' gate (``DriftGate``), which grows with the distance driven."""
+    from robot.boxfix import BoxFixConfig
+    from robot.headingfix import HeadingFixConfig, WallFixes
+
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(1.0, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+    wall = _evidence_with_solid(frame, [(2.02, float(y)) for y in np.arange(0.0, 2.0, 0.05)])
+    config = BoxFixConfig()
+    fixes = WallFixes(frame, ROBOT, config, HeadingFixConfig())
+    short = Pose(2.0 - ROBOT.radius_m - 0.10, 1.0, 0.0)  # 10 cm short of touching the east wall
+
+    def bump(believed: Pose) -> bool:
+        return not fixes.contact(DeadReckoning(ROBOT, believed), believed, 0.0, wall)[1]
+
+    assert config.gate_m + config.contact_spare_m < 0.10
+    assert not bump(short)  # nothing driven yet
+    assert bump(Pose(2.0 - ROBOT.radius_m - config.gate_m, 1.0, 0.0))  # within the fixed gate
+    # 10 cm of drift needs (10 - 2 - 5) cm / 2 cm per metre = 1.5 m of driving since that fix.
+    _driven(fixes, 1.2)
+    assert not bump(short)
+    _driven(fixes, 0.4)
+    assert bump(short)
+    assert not bump(short)  # the bump was a fix: the bound starts again
+    # A bound of the contact gate alone takes the first bump.
+    fixes = WallFixes(frame, ROBOT, BoxFixConfig(contact_spare_m=1.0), HeadingFixConfig())
+    assert bump(short)
 
 
 def test_heading_fixes_keep_a_large_room_on_the_truth() -> None:
