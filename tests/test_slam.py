@@ -202,6 +202,37 @@ def test_a_beam_that_runs_on_past_a_wrong_echo_clears_it() -> None:
     assert final_row(8)[ghost_col] == OCCUPIED
 
 
+def test_cones_that_ran_on_through_a_surface_found_later_clear_nothing_behind_it_at_the_end() -> None:
+    """A sonar whose echo off a surface is lost (at a glancing angle) may hear a farther one instead,
+    as multipath does: its cone clears the floor inside the obstacle before any echo has shown its
+    face, and the evidence stays. At the end every sweep's cones are cleared again, hidden behind
+    what the whole run shows occupied (room2 at 0.1 m: the inside of a desk set at 30 degrees went
+    white)."""
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    frame = MapFrame(grid=grid, start=Pose(0.5, 1.5, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
+    face_col = int(grid.world_to_index(1.7, 1.5)[1])
+
+    def final_rows(final_occlusion: bool) -> np.ndarray:
+        params = LogOddsParams(final_occlusion=final_occlusion)
+        mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(logodds=params))
+        start = Pose(0.5, 1.5, 0.0)
+        for _ in range(3):  # the long readings, through the block whose face is at x = 1.6
+            mapper.integrate(start, _front_echo_to(2.8, start))
+        for y in np.arange(0.8, 2.25, 0.1):  # then the face, from along it
+            pose = Pose(0.5, float(y), 0.0)
+            for _ in range(12):
+                mapper.integrate(pose, _front_echo_to(1.6, pose))
+        mapper.finalize()
+        rows = [int(grid.world_to_index(1.5, y)[0]) for y in (1.3, 1.5, 1.7)]
+        return mapper.states()[rows]
+
+    kept, cleared = final_rows(False), final_rows(True)
+    assert np.all(kept[:, face_col] == OCCUPIED) and np.all(cleared[:, face_col] == OCCUPIED)
+    assert np.all(kept[:, face_col + 1] == FREE)  # behind the face: cleared by the long readings
+    assert np.all(cleared[:, face_col + 1 :] == UNKNOWN)
+    assert np.array_equal(kept[:, : face_col + 1], cleared[:, : face_col + 1])  # the room side is the same
+
+
 def test_echoes_off_the_room_box_are_explained_by_its_wall() -> None:
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(0.4, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
