@@ -108,8 +108,9 @@ def test_ring_fires_in_order_with_a_gap_between_pings_across_sweeps():
     clock = FakeClock()
     bank = FakeBank(clock)
     pings: list[int] = []
-    ring = SonarRing(bank, (0, 4, 2, 6, 1, 5, 3, 7), 0.06, 4.0, clock=clock, sleep=clock.sleep,
-                     on_ping=lambda: pings.append(1))
+    ring = SonarRing(
+        bank, (0, 4, 2, 6, 1, 5, 3, 7), 0.06, 4.0, clock=clock, sleep=clock.sleep, on_ping=lambda: pings.append(1)
+    )
     first = ring.sweep()
     ring.sweep()
     order = [index for index, _ in bank.pinged]
