@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from robot.config import RobotConfig
 from robot.explore import Action, Explorer
-from robot.grid import OCCUPIED, UNKNOWN, lone_occupied
+from robot.grid import OCCUPIED, UNKNOWN, dilate8, lone_occupied
 from robot.hardware import Hardware
 from robot.headingfix import WallFixes, repairs_possible
 from robot.localization import DeadReckoning, PoseEstimate
@@ -26,7 +26,7 @@ from robot.mapping.journal import JournaledMapper
 from robot.motion import Pilot
 from robot.sensorlog import SensorLogWriter
 from robot.slam_config import SlamConfig
-from robot.truth import dilate8, reachable_cells, truth_states
+from robot.truth import reachable_cells, truth_states
 
 _NO_CELLS = (np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64))  # no change to the exported map
 

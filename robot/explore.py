@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from robot.grid import UNKNOWN, GridSpec
-from robot.truth import dilate8, reachable_cells
+from robot.grid import UNKNOWN, GridSpec, dilate8
+from robot.truth import reachable_cells
 
 # Neighbour offsets (drow, dcol) clockwise from "north" (+y, which is row - 1).
 CLOCKWISE = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))

@@ -119,3 +119,15 @@ def lone_occupied(states: NDArray[np.int8]) -> NDArray[np.bool_]:
             if dr != 1 or dc != 1:
                 neighbours |= not_free[dr : dr + rows, dc : dc + cols]
     return (states == OCCUPIED) & ~neighbours
+
+
+def dilate8(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """``mask`` grown by one cell in all eight directions."""
+    rows, cols = mask.shape
+    padded = np.zeros((rows + 2, cols + 2), dtype=bool)
+    padded[1:-1, 1:-1] = mask
+    out = np.zeros_like(mask)
+    for dr in range(3):
+        for dc in range(3):
+            out |= padded[dr : dr + rows, dc : dc + cols]
+    return out

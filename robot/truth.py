@@ -7,7 +7,7 @@ import shapely
 from numpy.typing import NDArray
 
 from robot.errors import WorldError
-from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec
+from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, dilate8
 from robot.world import World
 
 
@@ -91,18 +91,6 @@ def reachable_cells(blocked: NDArray[np.bool_], start_row: int, start_col: int) 
         if new_count == count:
             return reached
         count = new_count
-
-
-def dilate8(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
-    """``mask`` grown by one cell in all eight directions."""
-    rows, cols = mask.shape
-    padded = np.zeros((rows + 2, cols + 2), dtype=bool)
-    padded[1:-1, 1:-1] = mask
-    out = np.zeros_like(mask)
-    for dr in range(3):
-        for dc in range(3):
-            out |= padded[dr : dr + rows, dc : dc + cols]
-    return out
 
 
 def truth_states(blocked: NDArray[np.bool_], reachable: NDArray[np.bool_]) -> NDArray[np.int8]:

@@ -233,6 +233,40 @@ def test_cones_that_ran_on_through_a_surface_found_later_clear_nothing_behind_it
     assert np.array_equal(kept[:, : face_col + 1], cleared[:, : face_col + 1])  # the room side is the same
 
 
+def test_a_cell_beside_an_obstacle_exports_white_only_when_all_of_it_was_seen_free() -> None:
+    """The tip of a turned desk or an ellipse pokes a few centimetres into the next map cell, where
+    no beam reaches it without touching the obstacle: the rest of that cell is seen free. In the
+    exported map a cell beside a black one needs every evidence cell free to be white; elsewhere
+    nearly all (``white_min_free``) will do."""
+    grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
+    frame = MapFrame(grid=grid, start=Pose(0.5, 0.5, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
+
+    def exported(beside: float) -> tuple[np.ndarray, np.ndarray]:
+        params = LogOddsParams(final_occlusion=False, white_min_free=0.9, white_min_free_beside=beside)
+        mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(logodds=params))
+        assert isinstance(mapper, LogOddsMapper)
+        k = mapper.k
+        inner = mapper.free_evidence[mapper._inner]  # a view: one evidence cell per k x k block
+        inner[:] = -5.0
+        row, col = (int(v) for v in grid.world_to_index(1.1, 1.1))
+        mapper.contact_evidence[mapper._inner][row * k + 1, col * k + 1] = 5.0  # an obstacle in (row, col)
+        inner[row * k + 1, col * k + 1] = 0.0
+        for r, c in ((row, col + 1), (row + 4, col)):  # a cell beside it and one away, each with one blind spot
+            inner[r * k + 1, c * k] = 0.0
+        mapper._changed()
+        live = mapper.states()
+        mapper.finalize()
+        return live, mapper.states()
+
+    row, col = (int(v) for v in grid.world_to_index(1.1, 1.1))
+    live, final = exported(beside=1.0)
+    assert live[row, col] == OCCUPIED and final[row, col] == OCCUPIED
+    assert live[row, col + 1] == FREE  # while exploring, nearly all of it seen free will do ...
+    assert final[row, col + 1] == UNKNOWN  # ... but not in the finished map
+    assert live[row + 4, col] == FREE and final[row + 4, col] == FREE  # away from obstacles it will
+    assert exported(beside=0.9)[1][row, col + 1] == FREE
+
+
 def test_echoes_off_the_room_box_are_explained_by_its_wall() -> None:
     grid = GridSpec(0.0, 0.0, 0.2, 10, 10)
     frame = MapFrame(grid=grid, start=Pose(0.4, 1.0, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
