@@ -272,9 +272,11 @@ def test_a_free_cell_between_two_black_ones_is_black_in_the_finished_map_at_fine
     its outline, and the free floor then runs into the obstacle's inside. In the finished map, when a
     cell is narrower than the robot, a free cell between two black ones in a row or a column is
     black, except where the robot's body has been."""
-    grid = GridSpec(0.0, 0.0, 0.1, 20, 20)
 
-    def final_map(fill_gaps: bool, resolution: float = 0.1, body_at: tuple[float, float] | None = None) -> np.ndarray:
+    def final_map(
+        fill_gaps: bool, resolution: float = 0.1, body_at: tuple[float, float] | None = None
+    ) -> tuple[np.ndarray, int, int]:
+        """The finished map, and the row and column of the gap cell at (1.05, 1.05)."""
         g = GridSpec(0.0, 0.0, resolution, round(2.0 / resolution), round(2.0 / resolution))
         params = LogOddsParams(final_occlusion=False, fill_gaps=fill_gaps)
         frame = MapFrame(grid=g, start=Pose(0.5, 0.5, 0.0), extent=(0.0, 0.0, 2.0, 2.0))
@@ -289,20 +291,19 @@ def test_a_free_cell_between_two_black_ones_is_black_in_the_finished_map_at_fine
             mapper.mark_body(Pose(*body_at, 0.0))
         mapper._changed()
         mapper.finalize()
-        return mapper.states()
+        return mapper.states(), row, col
 
-    row, col = (int(v) for v in grid.world_to_index(1.05, 1.05))
-    assert final_map(fill_gaps=False)[row, col] == FREE
-    filled = final_map(fill_gaps=True)
+    kept, row, col = final_map(fill_gaps=False)
+    assert kept[row, col] == FREE
+    filled, _, _ = final_map(fill_gaps=True)
     assert filled[row, col] == OCCUPIED
     assert filled[row, col - 1] == OCCUPIED and filled[row, col + 1] == OCCUPIED
     assert filled[row + 1, col] == FREE and filled[row, col + 3] == FREE  # nothing else changes
     # Where the robot's body has been, the floor is free.
-    assert final_map(fill_gaps=True, body_at=(1.05, 1.05))[row, col] == FREE
+    assert final_map(fill_gaps=True, body_at=(1.05, 1.05))[0][row, col] == FREE
     # At 0.2 m a cell is wider than the robot, and a one-cell gap may be a way through.
-    g2 = GridSpec(0.0, 0.0, 0.2, 10, 10)
-    r2, c2 = (int(v) for v in g2.world_to_index(1.05, 1.05))
-    assert final_map(fill_gaps=True, resolution=0.2)[r2, c2] == FREE
+    coarse, r2, c2 = final_map(fill_gaps=True, resolution=0.2)
+    assert coarse[r2, c2] == FREE
 
 
 def test_echoes_off_the_room_box_are_explained_by_its_wall() -> None:
