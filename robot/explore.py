@@ -58,8 +58,9 @@ class Explorer:
     stack: list[tuple[int, int]] = field(default_factory=list)
     inspections: dict[tuple[int, int], int] = field(default_factory=dict)  # map cell -> count
     given_up: set[tuple[int, int]] = field(default_factory=set)
-    max_escapes: int = 5  # times a robot boxed in by its own map may retry the cells it has stood in
+    max_escapes: int = 5  # times a robot boxed in by its own map may step again into a cell it escaped to
     escapes: int = 0
+    escaped_to: set[tuple[int, int]] = field(default_factory=set)  # cells escape moves have headed for
     max_probes: int = 8  # drives into a cell the map holds occupied, to find a passage (see ``probe``)
     probe_min_cells: int = 4  # ... to traversable floor beyond with at least this many navigation cells
     probe_free_fraction: float = 0.9  # ... seen free over this share
@@ -252,9 +253,15 @@ class Explorer:
             # bump) closes every way out. Cells the robot has stood in, and the straight moves
             # between them, were passable once; retry them rather than end the run with the room
             # half explored.
+            # A step into a cell not escaped to before does not count against the budget: a robot
+            # backing out of a long slot that the map has since closed steps through new cells, while
+            # one that keeps bumping, or goes round in a loop, steps into the same ones again.
             action, _ = self._search(current, trav | self.visited, front, relaxed=True)
             if action is not None:
-                self.escapes += 1
+                if action.target is None or action.target in self.escaped_to:
+                    self.escapes += 1
+                else:
+                    self.escaped_to.add(action.target)
         if action is not None:
             return action
         if probe_cells is not None:
