@@ -46,10 +46,13 @@ def load_run_config(path: Path | str | None = None, slam_overrides: dict[str, An
             raise ConfigError(f"{path}: unknown table [{unknown[0]}] (expected slam, {', '.join(ROBOT_TABLES)})")
         robot_data = _merge(robot_data, {k: v for k, v in user.items() if k in ROBOT_TABLES})
         slam_data = _merge(slam_data, user.get("slam", {}))
-    for key, value in (slam_overrides or {}).items():
-        if value is not None:
-            slam_data[key] = value
+    given = {key: value for key, value in (slam_overrides or {}).items() if value is not None}
+    slam_data.update(given)
     robot, noise = robot_from_dict(robot_data, source)
-    slam = slam_config_from_dict(slam_data, source)
+    # A value given on the command line is named as such, not blamed on the settings file.
+    slam_source = source
+    if given:
+        slam_source += " (given: " + ", ".join(f"{key} = {value!r}" for key, value in given.items()) + ")"
+    slam = slam_config_from_dict(slam_data, slam_source)
     slam.check_robot(robot)
     return RunConfig(robot, noise, slam)

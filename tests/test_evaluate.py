@@ -116,3 +116,10 @@ def test_human_table_and_one_line_errors(evaluated, tmp_path: Path, capsys: pyte
     assert main(["evaluate", str(tmp_path / "missing.toml")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "missing.toml" in err
+
+
+def test_a_setting_given_on_the_command_line_is_named_in_its_error(capsys: pytest.CaptureFixture[str]) -> None:
+    # 0.01 m passes the command line's own check (a positive number) and fails the settings' bound.
+    assert main(["run", "--world", "room1", "--resolution", "0.01"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "resolution = 0.01" in err and "Traceback" not in err
