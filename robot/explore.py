@@ -271,9 +271,12 @@ class Explorer:
                 if step == cell:
                     self.probed.add(cell)
                 return Action("move", step, reason="probe")
-        # Nothing reachable is left to do: frontier cells nobody can get next to are given up.
+        # Nothing reachable is left to do: frontier cells nobody can get next to are given up. When the
+        # robot cannot get back to most of where it has been either, it is boxed in (its escapes
+        # spent): the map holds what it could see from there, and the run says so.
+        boxed_in = self._cut_off(reached)
         self.given_up.update(zip(*np.nonzero(front), strict=True))
-        return Action("done", reason="complete")
+        return Action("done", reason="boxed_in" if boxed_in else "complete")
 
     def probe(
         self,

@@ -447,8 +447,9 @@ def test_a_robot_boxed_in_by_its_own_map_retries_the_cells_it_has_stood_in() -> 
     action = explorer.decide((4, 0), 0.0, states, free > 0, free)
     # A first step into a cell is free of charge (see the slot test below).
     assert action.kind == "move" and action.target == (3, 1) and explorer.escapes == 0
-    # Without escapes the same robot ends the run with most of the room unexplored.
-    assert boxed_in(max_escapes=0).decide((4, 0), 0.0, states, free > 0, free).kind == "done"
+    # Without escapes the same robot ends the run with most of the room unexplored, and says why.
+    ended = boxed_in(max_escapes=0).decide((4, 0), 0.0, states, free > 0, free)
+    assert ended.kind == "done" and ended.reason == "boxed_in"
     # Escapes are bounded: a robot that keeps bumping out of the corner ends in the end. Each retry
     # of the same cell counts.
     explorer = boxed_in(max_escapes=2)
@@ -460,11 +461,13 @@ def test_a_robot_boxed_in_by_its_own_map_retries_the_cells_it_has_stood_in() -> 
             break
         explorer.bumped[action.target] = True  # the move failed; the robot is back in the corner
     assert actions == ["move", "move", "move", "done"] and explorer.escapes == 2
+    assert action.reason == "boxed_in"
     # A run that has simply finished, with every place it has been still in reach, does not escape.
     done = Explorer(grid, 1, (0, 0))
     done.visited[:, :] = True
     done.bumped[0, 4] = True
-    assert done.decide((0, 0), 0.0, states, free > 0, free).kind == "done" and done.escapes == 0
+    finished = done.decide((0, 0), 0.0, states, free > 0, free)
+    assert finished.kind == "done" and finished.reason == "complete" and done.escapes == 0
 
 
 def test_a_robot_backs_out_of_a_long_slot_its_map_has_closed_whatever_the_escape_budget() -> None:
