@@ -123,3 +123,4 @@ def test_a_setting_given_on_the_command_line_is_named_in_its_error(capsys: pytes
     assert main(["run", "--world", "room1", "--resolution", "0.01"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "resolution = 0.01" in err and "Traceback" not in err
+    assert "slam.toml" not in err  # the settings file is not to blame
