@@ -6,18 +6,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
-
-from robot.config import (
-    DEFAULT_ROBOT_FILE,
-    RobotConfig,
-    SimNoise,
-    format_validation_error,
-    read_toml,
-    robot_from_dict,
-)
+from robot.config import DEFAULT_ROBOT_FILE, RobotConfig, SimNoise, read_toml, robot_from_dict
 from robot.errors import ConfigError
-from robot.slam_config import DEFAULT_SLAM_FILE, SlamConfig
+from robot.slam_config import DEFAULT_SLAM_FILE, SlamConfig, slam_config_from_dict
 
 ROBOT_TABLES = ("robot", "sonar", "sonars", "imu", "sim_noise")
 
@@ -58,15 +49,6 @@ def load_run_config(path: Path | str | None = None, slam_overrides: dict[str, An
     given = {key: value for key, value in (slam_overrides or {}).items() if value is not None}
     slam_data.update(given)
     robot, noise = robot_from_dict(robot_data, source)
-    try:
-        slam = SlamConfig.model_validate(slam_data)
-    except ValidationError as exc:
-        # A value given on the command line (or in a request) is named as such, not blamed on the
-        # settings file.
-        err = exc.errors()[0]
-        key = str(err["loc"][0]) if err["loc"] else ""
-        if key in given:
-            raise ConfigError(f"{key} = {given[key]!r}: {err['msg']}") from None
-        raise ConfigError(format_validation_error(source, exc)) from None
+    slam = slam_config_from_dict(slam_data, source, given)
     slam.check_robot(robot)
     return RunConfig(robot, noise, slam)

@@ -87,10 +87,18 @@ class SlamConfig(BaseModel):
             )
 
 
-def slam_config_from_dict(data: dict[str, Any], source: str = "slam config") -> SlamConfig:
+def slam_config_from_dict(
+    data: dict[str, Any], source: str = "slam config", given: dict[str, Any] | None = None
+) -> SlamConfig:
+    """Validate ``data`` (read from ``source``, with the ``given`` settings on top). A bad value that
+    was given (on the command line, in a request) is named as such, not blamed on ``source``."""
     try:
         return SlamConfig.model_validate(data)
     except ValidationError as exc:
+        err = exc.errors()[0]
+        key = str(err["loc"][0]) if err["loc"] else ""
+        if given and key in given:
+            raise ConfigError(f"{key} = {given[key]!r}: {err['msg']}") from None
         raise ConfigError(format_validation_error(source, exc)) from None
 
 
@@ -99,7 +107,6 @@ def load_slam_config(path: Path | str | None = None, overrides: dict[str, Any] |
     p = Path(path) if path is not None else DEFAULT_SLAM_FILE
     data = read_toml(p) if p.exists() or path is not None else {}
     data = dict(data.get("slam", data))
-    for key, value in (overrides or {}).items():
-        if value is not None:
-            data[key] = value
-    return slam_config_from_dict(data, str(p))
+    given = {key: value for key, value in (overrides or {}).items() if value is not None}
+    data.update(given)
+    return slam_config_from_dict(data, str(p), given)
