@@ -74,6 +74,12 @@ def irregular_room(rng: random.Random) -> tuple[str, BaseGeometry]:
     return "polygon", Polygon(points)
 
 
+def _rect(c: tuple[float, float], size: list[float], angle: float) -> tuple[dict[str, Any], BaseGeometry]:
+    """A rect obstacle centred at ``c``, turned by ``angle`` degrees: its world-file entry and shape."""
+    g = rotate(box(c[0] - size[0] / 2, c[1] - size[1] / 2, c[0] + size[0] / 2, c[1] + size[1] / 2), angle)
+    return {"shape": "rect", "center": list(c), "size": size, "angle_deg": angle}, g
+
+
 def furniture(rng: random.Random, kind: str, room: BaseGeometry) -> list[tuple[dict[str, Any], BaseGeometry]]:
     step = 0.01 if kind == "polygon" else 0.05
     min_x, min_y, max_x, max_y = room.bounds
@@ -92,8 +98,7 @@ def furniture(rng: random.Random, kind: str, room: BaseGeometry) -> list[tuple[d
         if pick == "rect":
             size = [_q(rng.uniform(0.3, 1.2), step), _q(rng.uniform(0.3, 0.8), step)]
             angle = rng.choice([0.0, 0.0, 90.0, float(round(rng.uniform(-40, 40)))])
-            g = rotate(box(c[0] - size[0] / 2, c[1] - size[1] / 2, c[0] + size[0] / 2, c[1] + size[1] / 2), angle)
-            shape = {"shape": "rect", "center": list(c), "size": size, "angle_deg": angle}
+            shape, g = _rect(c, size, angle)
         else:
             radius = 0.025 if pick == "leg" else _q(rng.uniform(0.1, 0.3), step)
             g = Point(c).buffer(radius)
@@ -152,8 +157,7 @@ def furnishings(rng: random.Random, room: BaseGeometry) -> list[tuple[dict[str, 
         elif pick == "rect":
             size = [_q(rng.uniform(0.3, 1.2), 0.05), _q(rng.uniform(0.3, 0.8), 0.05)]
             angle = float(rng.choice([0, 90, rng.randint(-60, 60)]))
-            g = rotate(box(c[0] - size[0] / 2, c[1] - size[1] / 2, c[0] + size[0] / 2, c[1] + size[1] / 2), angle)
-            shape = {"shape": "rect", "center": list(c), "size": size, "angle_deg": angle}
+            shape, g = _rect(c, size, angle)
         elif pick == "ellipse":
             radii = [_q(rng.uniform(0.2, 0.7), 0.05), _q(rng.uniform(0.15, 0.45), 0.05)]
             angle = float(rng.randint(-90, 90))
@@ -257,8 +261,8 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
     print(f"{'room':<22s} {'F1':>6s} {'recall':>6s} {'steps':>6s} {'ended by':<11s} {'xy cm':>6s} {'deg':>5s}")
     rows = []
+    prefix = "unseen" if args.style == "mixed" else "furnished"
     while len(rows) < args.rooms:
-        prefix = "unseen" if args.style == "mixed" else "furnished"
         data = random_world(rng, f"{prefix}{args.seed}_{len(rows)}", args.style)
         if data is None:
             continue
