@@ -185,6 +185,18 @@ def test_a_wall_running_towards_the_box_edge_is_extended_to_it() -> None:
     assert meet_at_corners([flat], params, box) == [flat]
 
 
+def test_a_wall_parallel_to_a_box_edge_meets_nothing_when_every_angle_approaches_it() -> None:
+    """``near_axis_min_deg = 0`` (a setting the config allows) lets any wall approach the box edges:
+    a wall parallel to one of them never meets it, and finishing the map divided by zero."""
+    box = box_walls((0.0, 0.0, 3.0, 2.0))
+    flat = Line(theta=-math.pi / 2, d=-0.3, s0=0.5, s1=1.5, echoes=20, scatter=0.01)  # y = 0.3, facing down
+    params = TangentParams(near_axis_min_deg=0.0, box_approach_m=0.15)
+    assert meet_at_corners([flat], params, box) == [flat]
+    # It still runs on to the side edge that its stretch ends near (x = 0.1, 10 cm from x = 0).
+    (out,) = meet_at_corners([replace(flat, s0=0.1)], params, box)
+    assert out.s0 == pytest.approx(0.0) and out.s1 == flat.s1
+
+
 def test_a_line_must_run_along_occupied_evidence() -> None:
     fine = GridSpec(0.0, 0.0, 0.05, 40, 40)
     occupied = np.zeros(fine.shape, dtype=bool)

@@ -186,8 +186,8 @@ def meet_at_corners(lines: list[Line], params: TangentParams, walls: Sequence[Li
             if b is a:
                 continue
             det = math.sin(b.theta - a.theta)
-            if abs(det) < (min_approach_sin if known and approach > 0.0 else min_sin):
-                continue
+            if det == 0.0 or abs(det) < (min_approach_sin if known and approach > 0.0 else min_sin):
+                continue  # parallel lines never meet (a threshold of 0 is allowed)
             # n_a . p = d_a and n_b . p = d_b
             x = (a.d * math.sin(b.theta) - b.d * math.sin(a.theta)) / det
             y = (b.d * math.cos(a.theta) - a.d * math.cos(b.theta)) / det
