@@ -22,7 +22,7 @@ from robot.localization import DeadReckoning, PoseEstimate, wrap_angle
 class MotionConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    tick_s: float = Field(default=0.2, gt=0.0, le=0.5)  # control period [s]
+    tick_s: float = Field(default=0.2, ge=0.01, le=0.5)  # control period [s]: 100 Hz at most
     drive_speed_m_s: float = Field(default=0.2, gt=0.0)  # cruise rim speed
     turn_speed_m_s: float = Field(default=0.08, gt=0.0)  # rim speed when turning in place
     min_speed_m_s: float = Field(default=0.05, gt=0.0)  # creep speed near the goal

@@ -688,6 +688,21 @@ def test_config_refuses_settings_that_cannot_work() -> None:
         load_run_config(None, {"resolution": 0.05, "nav_cell_min_m": 0.05})
 
 
+@pytest.mark.parametrize(
+    ("table", "key", "value"),
+    [
+        ("motion", "tick_s", 1e-6),  # a control loop of a million ticks a second never finishes a move
+        ("logodds.tangents", "theta_step_deg", 1e-6),  # a wall accumulator of tens of gigabytes
+        ("logodds.tangents", "d_step_m", 1e-6),
+    ],
+)
+def test_config_refuses_settings_that_would_hang_or_exhaust_memory(tmp_path, table: str, key: str, value: float):
+    path = tmp_path / "slam.toml"
+    path.write_text(f"[slam.{table}]\n{key} = {value}\n")
+    with pytest.raises(ConfigError, match=rf"{table}\.{key}: Input should be greater than or equal to"):
+        load_run_config(path, {})
+
+
 # -- the engine --------------------------------------------------------------------------------
 def test_an_exact_robot_maps_a_small_room_and_says_why_it_stopped() -> None:
     world = small_world([{"shape": "rect", "center": [1.3, 0.9], "size": [0.4, 0.3], "angle_deg": 0.0}])

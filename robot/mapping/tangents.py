@@ -32,8 +32,10 @@ class TangentParams(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     enabled: bool = True
-    theta_step_deg: float = Field(default=1.0, gt=0.0, le=10.0)  # accumulator bin, normal direction
-    d_step_m: float = Field(default=0.02, gt=0.0)  # accumulator bin, distance
+    # The accumulator holds 360 / theta_step_deg x (the echoes' spread of distances / d_step_m) bins:
+    # the lower bounds keep it within tens of megabytes in a 20 m room.
+    theta_step_deg: float = Field(default=1.0, ge=0.25, le=10.0)  # accumulator bin, normal direction
+    d_step_m: float = Field(default=0.02, ge=0.005)  # accumulator bin, distance
     max_range_m: float = Field(default=1.5, gt=0.0)  # only echoes this short vote
     min_votes: float = Field(default=15.0, gt=0.0)  # a line needs this many echoes ...
     min_places: int = Field(default=3, ge=2)  # ... from this many places (5 cm apart) ...
