@@ -137,10 +137,10 @@ class SimNoise(_Frozen):
 
 
 def format_validation_error(source: str, exc: ValidationError) -> str:
-    """One line naming the source and the first offending field."""
-    err = exc.errors()[0]
-    where = ".".join(str(p) for p in err["loc"]) or "(top level)"
-    return f"{source}: {where}: {err['msg']}"
+    """One line naming the source and every offending field, so that a file with several mistakes
+    is fixed in one go."""
+    parts = [f"{'.'.join(str(p) for p in err['loc']) or '(top level)'}: {err['msg']}" for err in exc.errors()]
+    return f"{source}: {'; '.join(parts)}"
 
 
 def read_toml(path: Path) -> dict[str, Any]:

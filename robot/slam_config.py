@@ -95,10 +95,10 @@ def slam_config_from_dict(
     try:
         return SlamConfig.model_validate(data)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        key = str(err["loc"][0]) if err["loc"] else ""
-        if given and key in given:
-            raise ConfigError(f"{key} = {given[key]!r}: {err['msg']}") from None
+        for err in exc.errors():
+            key = str(err["loc"][0]) if err["loc"] else ""
+            if given and key in given:
+                raise ConfigError(f"{key} = {given[key]!r}: {err['msg']}") from None
         raise ConfigError(format_validation_error(source, exc)) from None
 
 

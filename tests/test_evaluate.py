@@ -124,3 +124,18 @@ def test_a_setting_given_on_the_command_line_is_named_in_its_error(capsys: pytes
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "resolution = 0.01" in err and "Traceback" not in err
     assert "slam.toml" not in err  # the settings file is not to blame
+
+
+def test_every_bad_setting_in_a_config_file_is_named_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "mine.toml"
+    config.write_text("[slam.motion]\ntick_s = 0.001\n\n[slam.logodds.tangents]\ntheta_step_deg = 0.01\n")
+    assert main(["run", "--world", "room1", "--config", str(config)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "mine.toml" in err and "Traceback" not in err
+    assert "motion.tick_s" in err and "logodds.tangents.theta_step_deg" in err
+    # A bad setting given on the command line is still named alone, before the file's.
+    assert main(["run", "--world", "room1", "--config", str(config), "--resolution", "0.01"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "resolution = 0.01" in err and "tick_s" not in err
