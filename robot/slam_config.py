@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from robot.boxfix import BoxFixConfig
-from robot.config import CONFIG_DIR, RobotConfig, format_validation_error, read_toml
+from robot.config import CONFIG_DIR, RobotConfig, format_validation_error
 from robot.errors import ConfigError
 from robot.headingfix import HeadingFixConfig
 from robot.localization import LocalizationConfig
@@ -100,13 +99,3 @@ def slam_config_from_dict(
             if given and key in given:
                 raise ConfigError(f"{key} = {given[key]!r}: {err['msg']}") from None
         raise ConfigError(format_validation_error(source, exc)) from None
-
-
-def load_slam_config(path: Path | str | None = None, overrides: dict[str, Any] | None = None) -> SlamConfig:
-    """Defaults from ``config/slam.toml`` (or ``path``), then ``overrides`` on top."""
-    p = Path(path) if path is not None else DEFAULT_SLAM_FILE
-    data = read_toml(p) if p.exists() or path is not None else {}
-    data = dict(data.get("slam", data))
-    given = {key: value for key, value in (overrides or {}).items() if value is not None}
-    data.update(given)
-    return slam_config_from_dict(data, str(p), given)
