@@ -36,7 +36,7 @@ class StepResult:
     step: int
     t_s: float  # clock time at the end of the step [s]
     pose: PoseEstimate  # estimated pose, map frame
-    action: str  # "start", "explore", "backtrack", "revisit", "frontier", "inspect", "done"
+    action: str  # "start", "explore", "backtrack", "revisit", "frontier", "probe", "inspect", "unpin", "done"
     target_xy: tuple[float, float] | None  # where the robot was heading [m]
     changed_rows: NDArray[np.int64]
     changed_cols: NDArray[np.int64]
@@ -106,7 +106,12 @@ class SlamEngine:
         self.pilot = Pilot(hw, robot, self.dead_reckoning, config.motion, on_tick=self._on_tick, recorder=recorder)
         block = config.nav_block(robot)
         self.explorer = Explorer(
-            frame.grid, block, (0, 0), max_inspections=config.max_inspections, max_probes=config.max_probes
+            frame.grid,
+            block,
+            (0, 0),
+            max_inspections=config.max_inspections,
+            max_probes=config.max_probes,
+            max_unpins=config.max_unpins,
         )
         self.explorer.start_cell = self.explorer.nav_cell_of(frame.start.x, frame.start.y)
         self.stats = EngineStats(last_change_t=hw.now())
@@ -117,6 +122,7 @@ class SlamEngine:
         self._free_fraction = np.zeros(frame.grid.shape)
         self._outside = blocked_by_extent(frame)
         self._started = False
+        self._failed_heading: float | None = None  # heading of the last move that failed [rad]
         self.last_sweep: NDArray[np.float64] | None = None
         self.done = False
 
@@ -164,6 +170,7 @@ class SlamEngine:
                 return False
             moved = self.pilot.drive_to(x, y)
             if not moved.ok:
+                self._failed_heading = heading
                 pose, unexplained = self.fixes.contact(
                     self.dead_reckoning, moved.pose.as_pose(), heading, self.mapper.evidence()
                 )
@@ -173,6 +180,21 @@ class SlamEngine:
                     self.recorder.contact(self.hw.now(), heading)
                 return False
         return True
+
+    def _unpin(self) -> bool:
+        """Step off sideways from the line of the last move that failed, by ``unpin_m``: first to its
+        left, and if that stalls (the side the body touches), to its right. True if either went."""
+        along = self._failed_heading if self._failed_heading is not None else self.pose.theta
+        for side in (1.0, -1.0):
+            # A quarter turn off a heading that is a multiple of 45 degrees is one too.
+            heading = along + side * math.pi / 2
+            if not self.pilot.turn_to(heading).ok:
+                continue
+            est = self.pose
+            d = self.config.unpin_m
+            if self.pilot.drive_to(est.x + d * math.cos(heading), est.y + d * math.sin(heading)).ok:
+                return True
+        return False
 
     def _recover(self, home: tuple[int, int]) -> None:
         """After a failed move, return to the centre of the cell the move started from."""
@@ -316,6 +338,10 @@ class SlamEngine:
                 self._recover(current)
             self._sweep()
             result = self._refresh(action.reason, target_xy, ok)
+        elif action.kind == "unpin":
+            ok = self._unpin()
+            self._sweep()
+            result = self._refresh("unpin", None, ok)
         elif action.kind == "inspect" and action.heading_rad is not None:
             self.pilot.turn_to(action.heading_rad)
             self._sweep()

@@ -40,7 +40,7 @@ def direction_heading(index: int) -> float:
 
 @dataclass
 class Action:
-    kind: str  # "move", "inspect", "done"
+    kind: str  # "move", "inspect", "unpin", "done"
     target: tuple[int, int] | None = None  # navigation cell to move to
     heading_rad: float | None = None  # for "inspect": face this way and sweep
     reason: str = ""  # "explore", "backtrack", "revisit", "frontier", or for done: terminated_by
@@ -62,6 +62,8 @@ class Explorer:
     escapes: int = 0
     escaped_to: set[tuple[int, int]] = field(default_factory=set)  # cells escape moves have headed for
     max_probes: int = 8  # drives into a cell the map holds occupied, to find a passage (see ``probe``)
+    max_unpins: int = 0  # last-resort side steps before ending boxed in (see ``_plan``)
+    unpins: int = 0
     probe_min_cells: int = 4  # ... to traversable floor beyond with at least this many navigation cells
     probe_free_fraction: float = 0.9  # ... seen free over this share
     probed: set[tuple[int, int]] = field(default_factory=set)
@@ -275,6 +277,14 @@ class Explorer:
         # robot cannot get back to most of where it has been either, it is boxed in (its escapes
         # spent): the map holds what it could see from there, and the run says so.
         boxed_in = self._cut_off(reached)
+        if boxed_in and self.unpins < self.max_unpins:
+            # Before giving up: the robot may only be pinned against what it grazes, every move
+            # stalling on a centimetre of position error. Once it has stepped off sideways, the moves
+            # that failed are worth trying again, with a fresh budget of escapes.
+            self.unpins += 1
+            self.escapes = 0
+            self.bumped[:] = False
+            return Action("unpin", reason="unpin")
         self.given_up.update(zip(*np.nonzero(front), strict=True))
         return Action("done", reason="boxed_in" if boxed_in else "complete")
 

@@ -51,6 +51,13 @@ class SlamConfig(BaseModel):
     # wider than the robot (furniture beside a doorway). It arrives, or stalls and marks the cell
     # bumped. At most this many a run (0: never).
     max_probes: int = Field(default=8, ge=0)
+    # A robot about to end its run boxed in (every way out stalled, its escapes spent) may first be
+    # pinned against what it grazes: a centimetre of position error in a slot barely wider than the
+    # body turns each move a fraction of a degree into the furniture. As a last resort it backs off
+    # sideways, off the line of the move that failed, by ``unpin_m`` (one side, else the other), and
+    # tries its moves again. At most this many times a run (0: never); no other run changes.
+    max_unpins: int = Field(default=2, ge=0, le=20)
+    unpin_m: float = Field(default=0.03, gt=0.0, le=0.2)
     unknown_room_size_m: float = Field(default=12.0, gt=0.5, le=100.0)  # grid side when the room size is unknown
     logodds: LogOddsParams = LogOddsParams()
     motion: MotionConfig = MotionConfig()

@@ -664,6 +664,58 @@ def test_a_robot_that_explored_down_a_slot_behind_a_cabinet_backs_out_and_maps_t
     assert result.metrics.f1 >= 0.9
 
 
+def test_a_boxed_in_robot_first_steps_off_sideways_and_retries_its_moves() -> None:
+    grid = GridSpec(0.0, 0.0, 0.2, 5, 5)
+    free = np.ones(grid.shape)
+    free[3, 0] = free[3, 1] = -1.0
+    states = np.where(free > 0, FREE, OCCUPIED).astype(np.int8)
+    explorer = Explorer(grid, 1, (3, 1), max_escapes=1, max_unpins=1)
+    explorer.visited[3, 1] = explorer.visited[4, 1] = True
+    explorer.bumped[4, 1] = explorer.bumped[3, 1] = True
+    explorer.escapes = 1  # spent
+    action = explorer.decide((4, 0), 0.0, states, free > 0, free)
+    # Instead of ending the run: a side step, then the failed moves are worth trying again.
+    assert action.kind == "unpin" and explorer.unpins == 1
+    assert not explorer.bumped.any() and explorer.escapes == 0 and not explorer.given_up
+    retry = explorer.decide((4, 0), 0.0, states, free > 0, free)
+    assert retry.kind == "move"
+    # Once the side steps are spent too, the run ends boxed in as before.
+    explorer.bumped[4, 1] = explorer.bumped[3, 1] = True
+    explorer.escapes = 1
+    ended = explorer.decide((4, 0), 0.0, states, free > 0, free)
+    assert ended.kind == "done" and ended.reason == "boxed_in"
+
+
+def test_a_robot_pinned_against_a_wardrobe_in_a_slot_steps_off_and_maps_the_room() -> None:
+    """A wardrobe 17 cm from the top wall; the robot explores along the slot with a centimetre to
+    spare, its estimate a centimetre off across it, so each move west heads a fraction of a degree
+    into the wardrobe and stalls. The run ended boxed in after 52 steps with most of the room unseen
+    (F1 0.43)."""
+    world = world_from_dict(
+        {
+            "name": "wardrobe-slot",
+            "boundary": [[4.45, 0.0], [4.45, 4.6], [0.0, 4.6], [0.0, 0.0]],
+            "start": {"x": 1.1, "y": 1.65, "theta_deg": 68.0},
+            "obstacles": [
+                {"shape": "polygon", "points": [[0.0, 0.0], [0.63, 0.0], [0.0, 0.46]]},
+                {"shape": "ellipse", "center": [0.8, 0.1], "radii": [0.25, 0.2], "angle_deg": -15.0},
+                {"shape": "rect", "center": [3.7, 4.005], "size": [1.4, 0.85]},
+            ],
+        },
+        "wardrobe-slot.toml",
+    )
+    cfg = load_run_config()
+    actions: list[str] = []
+    result = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0, on_step=lambda s: actions.append(s.action))
+    assert "unpin" in actions, "the robot is no longer pinned: the test does not test the side step"
+    assert result.terminated_by == "complete"
+    assert result.metrics.f1 >= 0.9
+    # Without the side step the same run ends boxed in.
+    cfg_off = load_run_config(None, {"max_unpins": 0})
+    pinned = simulate(world, cfg_off.robot, cfg_off.noise, cfg_off.slam, seed=0)
+    assert pinned.terminated_by == "boxed_in" and pinned.metrics.f1 < 0.6
+
+
 def test_a_far_arm_of_a_large_room_is_mapped_although_the_near_one_settles_long_before() -> None:
     """Walking the explored 4 x 5.4 m arm depth-first cell by cell took longer than the time limit,
     and the run ended with the far half of the 7.5 m arm unseen (F1 0.78)."""
