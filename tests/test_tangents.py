@@ -116,6 +116,51 @@ def test_a_wall_a_little_off_an_axis_cuts_only_the_cells_it_reaches_well_into() 
     assert not lines.cut_cells(grid, [nearly]).any()
 
 
+def test_a_wall_leaning_off_a_box_edge_cuts_every_cell_it_crosses() -> None:
+    """Along a box edge, a wall that leans off it leaves the edge at a vertex: every cell along it
+    holds a sliver of wall, so its cut takes no margin (``box_lean_margin_m``)."""
+    grid = GridSpec(0.0, 0.0, 0.2, 6, 3)
+    lines = TangentLines(HALF, TangentParams(enabled=True))
+    theta = math.radians(2.0)
+    leaning = Line(theta=theta, d=0.399 * math.cos(theta), s0=-0.1, s1=1.3, echoes=10, scatter=0.01)
+    assert lines.leans(leaning)
+    assert lines.cut_cells(grid, [leaning])[:, 1].tolist() == [True, True, False, False, False, False]
+    cut = lines.cut_cells(grid, [leaning], lines.params.box_lean_margin_m)
+    assert cut[:, 1].all() and not cut[:, 0].any() and not cut[:, 2].any()
+    # A degree off an axis is within what the box's own walls are found at.
+    theta = math.radians(1.0)
+    assert not lines.leans(Line(theta=theta, d=0.4 * math.cos(theta), s0=-0.1, s1=1.3, echoes=10, scatter=0.01))
+
+
+def test_a_polygon_wall_leaning_off_the_box_edge_blocks_the_cells_it_clips() -> None:
+    """A room whose left and right walls lean 2 degrees off its box edges, from vertices on them: every
+    cell of the grid's first and last columns along them holds a sliver of wall. Those walls were
+    taken for the box's own and the cells near the vertices, clipped by a centimetre or two, stayed
+    white."""
+    from robot.runner import simulate
+    from robot.settings import load_run_config
+    from robot.world import world_from_dict
+
+    room = {
+        "name": "leaning-sides",
+        "boundary": [
+            [3.89, 1.72], [3.95, 3.33], [2.75, 4.48], [1.08, 3.98], [0.0, 3.37],
+            [0.06, 1.81], [0.74, 0.57], [2.64, 0.0], [3.13, 0.97],
+        ],
+        "start": {"x": 2.93, "y": 2.1, "theta_deg": 0.0},
+    }  # fmt: skip
+    world = world_from_dict(room, "leaning-sides.toml")
+    cfg = load_run_config()
+    tangents = cfg.slam.logodds.tangents
+    before = tangents.model_copy(update={"box_lean_min_deg": 45.0})  # a wall along an edge was the box's
+    off = cfg.slam.model_copy(update={"logodds": cfg.slam.logodds.model_copy(update={"tangents": before})})
+    kept = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    lost = simulate(world, cfg.robot, cfg.noise, off, seed=0)
+    assert kept.trajectory == lost.trajectory  # only the final map changes
+    assert kept.metrics.recall > lost.metrics.recall
+    assert kept.metrics.f1 > lost.metrics.f1
+
+
 def test_walls_are_extended_to_the_corner_where_they_meet() -> None:
     """Echoes seldom touch a wall near a corner, so the stretches found stop short of it."""
     east = Line(theta=0.0, d=1.0, s0=0.2, s1=0.7, echoes=20, scatter=0.01)  # x = 1, touched for y 0.2-0.7
@@ -347,8 +392,13 @@ def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips(name: 
     world = world_from_dict({"name": name, **room}, f"{name}.toml")
     cfg = load_run_config()
     assert cfg.slam.logodds.face_slant_deg < 1.2
-    off = cfg.slam.model_copy(update={"logodds": cfg.slam.logodds.model_copy(update={"face_slant_deg": before_deg})})
-    kept = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=seed)
+    # The face rule alone: walls leaning off the box edge also cut the cells they cross (tested above),
+    # which would hide what the face rule does here.
+    logodds = cfg.slam.logodds
+    logodds = logodds.model_copy(update={"tangents": logodds.tangents.model_copy(update={"box_lean_min_deg": 45.0})})
+    slam = cfg.slam.model_copy(update={"logodds": logodds})
+    off = slam.model_copy(update={"logodds": logodds.model_copy(update={"face_slant_deg": before_deg})})
+    kept = simulate(world, cfg.robot, cfg.noise, slam, seed=seed)
     lost = simulate(world, cfg.robot, cfg.noise, off, seed=seed)
     assert kept.trajectory == lost.trajectory  # only the final map changes
     assert kept.metrics.recall > lost.metrics.recall

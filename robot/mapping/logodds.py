@@ -578,8 +578,15 @@ class LogOddsMapper:
             extent = self.frame.extent
             box = box_walls(extent) if extent is not None and self._tangents.params.meet_box else []
             walls = meet_at_corners(walls, self._tangents.params, box)
-            near = [extent is not None and self._tangents.near_box(w, extent) for w in walls]
-            self._cut = self._wall_cuts(self._tangents, [w for w, n in zip(walls, near, strict=True) if not n])
+            along_box = [extent is not None and self._tangents.near_box(w, extent) for w in walls]
+            # Along a box edge: the box's own walls, and walls leaning off it (see ``box_lean_min_deg``).
+            leaning = [b and self._tangents.leans(w) for w, b in zip(walls, along_box, strict=True)]
+            near = [b and not lean for b, lean in zip(along_box, leaning, strict=True)]
+            inside = [w for w, b in zip(walls, along_box, strict=True) if not b]
+            self._cut = self._wall_cuts(self._tangents, inside)
+            if any(leaning):
+                off_edge = [w for w, lean in zip(walls, leaning, strict=True) if lean]
+                self._cut |= self._wall_cuts(self._tangents, off_edge, self._tangents.params.box_lean_margin_m)
             box_found = [w for w, n in zip(walls, near, strict=True) if n]
             self._wall_face = self._face_band & ~self._past_slanting_walls(box_found)
             if self.params.face_needs_wall and extent is not None:
@@ -629,15 +636,16 @@ class LogOddsMapper:
             past |= wall.cells_past(xs, ys, half, self.params.tangents.margin_m)
         return past
 
-    def _wall_cuts(self, tangents: TangentLines, walls: list[Line]) -> NDArray[np.bool_]:
+    def _wall_cuts(self, tangents: TangentLines, walls: list[Line], margin_m: float | None = None) -> NDArray[np.bool_]:
         """Map cells that the straight walls the echoes agree on (``walls``, on the evidence and not
-        the room box's own) cut into, except where the robot's body has been on the far side of the
-        wall (then it is not a wall there: a doorway, say)."""
+        the room box's own) cut into (``margin_m`` past them, by default the tangents' margin for the
+        wall's angle), except where the robot's body has been on the far side of the wall (then it is
+        not a wall there: a doorway, say)."""
         rows, cols = self._inner
         xs, ys, body = self._centre_x[None, cols], self._centre_y[rows, None], self._body[self._inner]
         cut = np.zeros(self.frame.grid.shape, dtype=bool)
         for wall in walls:
-            cells = tangents.cut_cells(self.frame.grid, [wall])
+            cells = tangents.cut_cells(self.frame.grid, [wall], margin_m)
             if cells.any():
                 past = body & (wall.depth(xs, ys) > 0.0)
                 cut |= cells & ~(self._block_counts(past) > 0)
