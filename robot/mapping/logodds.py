@@ -631,7 +631,7 @@ class LogOddsMapper:
         past = np.zeros(self._face_band.shape, dtype=bool)
         half = 0.5 * self.fine.resolution
         for wall in walls:
-            if abs(math.remainder(wall.theta, math.pi / 2)) < math.radians(self.params.face_slant_deg):
+            if wall.off_axis_rad < math.radians(self.params.face_slant_deg):
                 continue
             past |= wall.cells_past(xs, ys, half, self.params.tangents.margin_m)
         return past

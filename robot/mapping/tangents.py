@@ -132,6 +132,11 @@ class Line:
     echoes: int
     scatter: float
 
+    @property
+    def off_axis_rad(self) -> float:
+        """How far the line runs off the nearest of the grid's axes [rad], in [0, pi / 4]."""
+        return abs(math.remainder(self.theta, math.pi / 2))
+
     def depth(self, xs: NDArray[np.float64], ys: NDArray[np.float64]) -> NDArray[np.float64]:
         """How far points lie past the line into the wall [m] (negative: on the room's side)."""
         return math.cos(self.theta) * xs + math.sin(self.theta) * ys - self.d
@@ -316,7 +321,7 @@ class TangentLines:
 
     def leans(self, line: Line) -> bool:
         """Whether ``line`` runs ``box_lean_min_deg`` or more off the grid's axes."""
-        return abs(math.remainder(line.theta, math.pi / 2)) >= math.radians(self.params.box_lean_min_deg)
+        return line.off_axis_rad >= math.radians(self.params.box_lean_min_deg)
 
     def _best_turn(
         self, theta: float, d: float, free: NDArray[np.bool_]
@@ -425,7 +430,7 @@ class TangentLines:
         xs, ys = grid.centers()
         half = 0.5 * res
         for line in lines:
-            off_axis = abs(math.remainder(line.theta, math.pi / 2))
+            off_axis = line.off_axis_rad
             margin = self.params.margin_m if margin_m is None else margin_m
             if margin_m is None and off_axis < math.radians(self.params.min_axis_angle_deg):
                 if off_axis < math.radians(self.params.near_axis_min_deg):
