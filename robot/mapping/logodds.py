@@ -579,15 +579,13 @@ class LogOddsMapper:
             box = box_walls(extent) if extent is not None and self._tangents.params.meet_box else []
             walls = meet_at_corners(walls, self._tangents.params, box)
             along_box = [extent is not None and self._tangents.near_box(w, extent) for w in walls]
-            # Along a box edge: the box's own walls, and walls leaning off it (see ``box_lean_min_deg``).
-            leaning = [b and self._tangents.leans(w) for w, b in zip(walls, along_box, strict=True)]
-            near = [b and not lean for b, lean in zip(along_box, leaning, strict=True)]
             inside = [w for w, b in zip(walls, along_box, strict=True) if not b]
+            # Along a box edge: walls leaning off it (see ``box_lean_min_deg``), and the box's own.
+            off_edge = [w for w, b in zip(walls, along_box, strict=True) if b and self._tangents.leans(w)]
+            box_found = [w for w, b in zip(walls, along_box, strict=True) if b and not self._tangents.leans(w)]
             self._cut = self._wall_cuts(self._tangents, inside)
-            if any(leaning):
-                off_edge = [w for w, lean in zip(walls, leaning, strict=True) if lean]
+            if off_edge:
                 self._cut |= self._wall_cuts(self._tangents, off_edge, self._tangents.params.box_lean_margin_m)
-            box_found = [w for w, n in zip(walls, near, strict=True) if n]
             self._wall_face = self._face_band & ~self._past_slanting_walls(box_found)
             if self.params.face_needs_wall and extent is not None:
                 self._wall_face &= self._faces_of_found_edges(self._tangents, extent, box_found)
