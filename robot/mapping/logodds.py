@@ -578,11 +578,16 @@ class LogOddsMapper:
             extent = self.frame.extent
             box = box_walls(extent) if extent is not None and self._tangents.params.meet_box else []
             walls = meet_at_corners(walls, self._tangents.params, box)
-            along_box = [extent is not None and self._tangents.near_box(w, extent) for w in walls]
-            inside = [w for w, b in zip(walls, along_box, strict=True) if not b]
-            # Along a box edge: walls leaning off it (see ``box_lean_min_deg``), and the box's own.
-            off_edge = [w for w, b in zip(walls, along_box, strict=True) if b and self._tangents.leans(w)]
-            box_found = [w for w, b in zip(walls, along_box, strict=True) if b and not self._tangents.leans(w)]
+            inside: list[Line] = []
+            off_edge: list[Line] = []  # along a box edge but leaning off it (see ``box_lean_min_deg``)
+            box_found: list[Line] = []  # the box's own
+            for w in walls:
+                if extent is None or not self._tangents.near_box(w, extent):
+                    inside.append(w)
+                elif self._tangents.leans(w):
+                    off_edge.append(w)
+                else:
+                    box_found.append(w)
             self._cut = self._wall_cuts(self._tangents, inside)
             if off_edge:
                 self._cut |= self._wall_cuts(self._tangents, off_edge, self._tangents.params.box_lean_margin_m)
