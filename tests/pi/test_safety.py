@@ -45,10 +45,16 @@ def test_sigterm_stops_the_motors_and_ends_the_run(robot_hw, motor_states):
 
 
 def test_sigint_handler_stops_the_motors(robot_hw, motor_states):
-    with pytest.raises(KeyboardInterrupt), safe_hardware(robot_hw):
-        robot_hw.set_wheel_speeds(-0.2, 0.2)
-        handler = signal.getsignal(signal.SIGINT)
-        handler(signal.SIGINT, None)
+    # Python's own handler before the guard's, as in a foreground process (a shell starts background
+    # jobs with SIGINT ignored, and the guard then keeps ignoring it after halting).
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt), safe_hardware(robot_hw):
+            robot_hw.set_wheel_speeds(-0.2, 0.2)
+            handler = signal.getsignal(signal.SIGINT)
+            handler(signal.SIGINT, None)
+    finally:
+        signal.signal(signal.SIGINT, outer)
     assert motor_states() == STOPPED
 
 
