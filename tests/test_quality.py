@@ -35,6 +35,8 @@ BARS = {
     "openhall": (0.80, 0.90),
     "pentagon": (0.94, 0.92),
     "heptagon": (0.93, 0.90),
+    "roundroom": (0.86, 0.78),
+    "turnedroom": (0.95, 0.93),
 }
 # The large rooms may also end by the time limit, the paper's other rule: on the hall's seed 0
 # four frontier cells stayed while the robot visited the cells it had left, and the map did not
