@@ -233,6 +233,47 @@ def test_cones_that_ran_on_through_a_surface_found_later_clear_nothing_behind_it
     assert np.array_equal(kept[:, : face_col + 1], cleared[:, : face_col + 1])  # the room side is the same
 
 
+def test_the_final_pass_keeps_the_strip_just_in_front_of_a_solid_cell_a_beam_ran_on_past() -> None:
+    """A beam that meets a slanted face at 25-50 degrees of incidence may hear nothing from it and
+    run on past it, clearing the strip in front of the solid cells: where the face cuts a few
+    centimetres into the next map cell. When the run ends, cells less than ``final_front_cells``
+    evidence cells in front of a solid one along such a beam stay as they were; the cell a whole
+    evidence cell in front, as in front of a face on a cell boundary seen head-on, is cleared."""
+    grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
+    frame = MapFrame(grid=grid, start=Pose(0.5, 1.0, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
+    sonar = ROBOT.sonars[0]  # the front one
+
+    def beside_solid(theta_deg: float, front_cells: float) -> tuple[float, float]:
+        """Belief in the solid evidence cell 1 m out on the front beam's axis, and in the one 5 cm
+        nearer along x, after readings that ran on past it to 2.5 m."""
+        params = LogOddsParams(final_front_cells=front_cells)
+        mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(logodds=params))
+        assert isinstance(mapper, LogOddsMapper)
+        theta = math.radians(theta_deg)
+        pose = Pose(0.5, 1.0, theta)
+        c, s = math.cos(theta), math.sin(theta)
+        tx = pose.x + c * sonar.offset_x_m - s * sonar.offset_y_m
+        ty = pose.y + s * sonar.offset_x_m + c * sonar.offset_y_m
+        row, col = (int(v) for v in mapper.fine.world_to_index(tx + c, ty + s))
+        mapper.contact_evidence[row, col] = 5.0
+        mapper._changed()
+        ranges = np.full(8, ROBOT.sonar.max_range_m)
+        ranges[0] = 2.5
+        for _ in range(3):
+            mapper.integrate(pose, ranges)
+        mapper.finalize()
+        return float(mapper.logodds[row, col]), float(mapper.logodds[row, col - 1])
+
+    p = LogOddsParams()
+    # At 30 degrees the cell 5 cm nearer along x is 4.3 cm nearer along the beam: kept ...
+    solid, near = beside_solid(30.0, p.final_front_cells)
+    assert solid >= p.occ_threshold and near > p.free_threshold
+    # ... but cleared without the margin, as it is while exploring.
+    assert beside_solid(30.0, 0.0)[1] <= p.free_threshold
+    # Head-on, the cell in front of the solid one is a whole evidence cell nearer: cleared.
+    assert beside_solid(0.0, p.final_front_cells)[1] <= p.free_threshold
+
+
 def test_a_cell_beside_an_obstacle_exports_white_only_when_all_of_it_was_seen_free() -> None:
     """The tip of a turned desk or an ellipse pokes a few centimetres into the next map cell, where
     no beam reaches it without touching the obstacle: the rest of that cell is seen free. In the
