@@ -234,9 +234,9 @@ def test_cones_that_ran_on_through_a_surface_found_later_clear_nothing_behind_it
 
 
 def test_the_final_pass_keeps_the_strip_just_in_front_of_a_solid_cell_a_beam_ran_on_past() -> None:
-    """A beam that meets a slanted face at 25-50 degrees of incidence may hear nothing from it and
-    run on past it, clearing the strip in front of the solid cells: where the face cuts a few
-    centimetres into the next map cell. When the run ends, cells less than ``final_front_cells``
+    """A beam that meets a face at a slant may hear nothing from it (a specular miss) and run on
+    past it, clearing the strip in front of the solid cells: where the face cuts a few centimetres
+    into the next map cell. When the run ends, cells less than ``final_front_cells``
     evidence cells in front of a solid one along such a beam stay as they were; the cell a whole
     evidence cell in front, as in front of a face on a cell boundary seen head-on, is cleared."""
     grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
