@@ -17,6 +17,7 @@ from robot.hardware import EncoderCounts, ImuBatch, ImuSample
 from robot.localization import DeadReckoning
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame
+from robot.mapping.geometry import place_beams
 from robot.mapping.logodds import LogOddsMapper, LogOddsParams
 from robot.metrics import score
 from robot.runner import RunResult, frame_for_world, simulate
@@ -241,7 +242,6 @@ def test_the_final_pass_keeps_the_strip_just_in_front_of_a_solid_cell_a_beam_ran
     evidence cell in front, as in front of a face on a cell boundary seen head-on, is cleared."""
     grid = GridSpec(0.0, 0.0, 0.2, 15, 15)
     frame = MapFrame(grid=grid, start=Pose(0.5, 1.0, 0.0), extent=(0.0, 0.0, 3.0, 3.0))
-    sonar = ROBOT.sonars[0]  # the front one
 
     def beside_solid(theta_deg: float, front_cells: float) -> tuple[float, float]:
         """Belief in the solid evidence cell 1 m out on the front beam's axis, and in the one 5 cm
@@ -249,16 +249,14 @@ def test_the_final_pass_keeps_the_strip_just_in_front_of_a_solid_cell_a_beam_ran
         params = LogOddsParams(final_front_cells=front_cells)
         mapper = make_mapper("logodds", frame, ROBOT, SlamConfig(logodds=params))
         assert isinstance(mapper, LogOddsMapper)
-        theta = math.radians(theta_deg)
-        pose = Pose(0.5, 1.0, theta)
-        c, s = math.cos(theta), math.sin(theta)
-        tx = pose.x + c * sonar.offset_x_m - s * sonar.offset_y_m
-        ty = pose.y + s * sonar.offset_x_m + c * sonar.offset_y_m
-        row, col = (int(v) for v in mapper.fine.world_to_index(tx + c, ty + s))
-        mapper.contact_evidence[row, col] = 5.0
-        mapper._changed()
+        pose = Pose(0.5, 1.0, math.radians(theta_deg))
         ranges = np.full(8, ROBOT.sonar.max_range_m)
         ranges[0] = 2.5
+        front = place_beams(pose, ranges, ROBOT)[0]
+        solid_xy = front.x + math.cos(front.axis_rad), front.y + math.sin(front.axis_rad)
+        row, col = (int(v) for v in mapper.fine.world_to_index(*solid_xy))
+        mapper.contact_evidence[row, col] = 5.0
+        mapper._changed()
         for _ in range(3):
             mapper.integrate(pose, ranges)
         mapper.finalize()

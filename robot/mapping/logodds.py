@@ -124,12 +124,12 @@ class LogOddsParams(BaseModel):
     # hear nothing from it (a specular miss) and run on past it, and it cleared the strip in front
     # of the solid cells, which is where a slanted or curved face cuts into the next cell. 0.9 of
     # an evidence cell, so that a face on a cell boundary seen head-on keeps the cells in front of
-    # it (one evidence cell, 5 cm, nearer). Only the finished map changes, not the
-    # paths. On the maps kept just before each run ended: 85 worlds x 3 seeds 0.9828 -> 0.9834 (58
-    # runs up, 22 down, at most -0.014); 64 fresh rooms x 2 seeds 0.9818 -> 0.9832 (38 up, 6 down);
-    # Table I room2 0.974 -> 0.978, room3 0.985 -> 0.986; at 0.1 m room2 0.940 -> 0.94996. A whole
-    # evidence cell (1.0) hid the cells in front of faces on cell boundaries: 85 worlds (seed 0)
-    # 0.9838 -> 0.9833, openhall -0.043. 0.95 scored as 0.9 on the paper's rooms, 0.8 less than half of it.
+    # it (one evidence cell, 5 cm, nearer). Only the finished map changes, not the paths. On the
+    # maps kept just before each run ended: 85 worlds x 3 seeds 0.9828 -> 0.9834 (58 runs up, 22
+    # down, at most -0.014); 64 fresh rooms x 2 seeds 0.9818 -> 0.9832 (38 up, 6 down); Table I
+    # room2 0.974 -> 0.978, room3 0.985 -> 0.986; at 0.1 m room2 0.940 -> 0.94996. A whole evidence
+    # cell (1.0) hid the cells in front of faces on cell boundaries: 85 worlds (seed 0) 0.9838 ->
+    # 0.9833, openhall -0.043. 0.95 scored as 0.9 on the paper's rooms, 0.8 less than half of it.
     final_front_cells: float = Field(default=0.9, ge=0.0, le=2.0)
     tangents: TangentParams = TangentParams()  # straight walls from the lines echoes are tangent to
 
