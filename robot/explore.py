@@ -217,6 +217,11 @@ class Explorer:
                 # was found occupied). Walking on may still open a view of them, but not for ever.
                 if give_up_closed and not self._cut_off(reached):
                     self.given_up.update(zip(*np.nonzero(front), strict=True))
+            # A gap the sonar arcs closed is left to resolve too: head for it now rather than after
+            # walking the rest of the room depth-first.
+            probing = self._probe_action(current, trav, free_fraction, probe_cells)
+            if probing is not None:
+                return probing
         first = direction_index(heading_rad)
         for k in range(8):
             d = CLOCKWISE[(first + k) % 8]
@@ -266,13 +271,9 @@ class Explorer:
                     self.escaped_to.add(action.target)
         if action is not None:
             return action
-        if probe_cells is not None:
-            goal = self.probe(current, trav, probe_cells, free_fraction)
-            if goal is not None:
-                step, cell = goal
-                if step == cell:
-                    self.probed.add(cell)
-                return Action("move", step, reason="probe")
+        probing = self._probe_action(current, trav, free_fraction, probe_cells)
+        if probing is not None:
+            return probing
         # Nothing reachable is left to do: frontier cells nobody can get next to are given up. When the
         # robot cannot get back to most of where it has been either, it is boxed in (its escapes
         # spent): the map holds what it could see from there, and the run says so.
@@ -287,6 +288,24 @@ class Explorer:
             return Action("unpin", reason="unpin")
         self.given_up.update(zip(*np.nonzero(front), strict=True))
         return Action("done", reason="boxed_in" if boxed_in else "complete")
+
+    def _probe_action(
+        self,
+        current: tuple[int, int],
+        trav: NDArray[np.bool_],
+        free_fraction: NDArray[np.float64],
+        probe_cells: NDArray[np.bool_] | None,
+    ) -> Action | None:
+        """The move towards the next probe (see ``probe``), or None when there is none."""
+        if probe_cells is None:
+            return None
+        goal = self.probe(current, trav, probe_cells, free_fraction)
+        if goal is None:
+            return None
+        step, cell = goal
+        if step == cell:
+            self.probed.add(cell)
+        return Action("move", step, reason="probe")
 
     def probe(
         self,

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from robot.boxfix import box_offsets
 from robot.config import RobotConfig, SimNoise
@@ -603,16 +604,23 @@ def test_a_settled_map_gives_up_unknown_cells_it_has_closed_off_instead_of_walki
     assert not boxed.given_up
 
 
-def test_a_cell_only_echoes_hold_occupied_is_probed_when_free_floor_lies_beyond_it() -> None:
-    """Row 2 runs from the explored room (columns 0-1) through a gap at (2, 2) that echoes closed,
-    on to floor seen free beyond (columns 3-5), walled off everywhere else."""
+def _room_with_a_closed_gap() -> tuple[
+    GridSpec, NDArray[np.float64], NDArray[np.int8], NDArray[np.bool_], NDArray[np.bool_]
+]:
+    """Row 2 runs from an explored room (columns 0-1) through a gap at (2, 2) that echoes closed, on
+    to floor seen free beyond (columns 3-5), walled off everywhere else: the grid, its free
+    fractions, states, passable cells and echoed cells (nothing bumped, nothing past the room box)."""
     grid = GridSpec(0.0, 0.0, 0.2, 5, 6)
     free_fraction = np.full(grid.shape, -1.0)
     free_fraction[:, 0:2] = 1.0
     free_fraction[2, 3:6] = 1.0
     states = np.where(free_fraction >= 0.0, FREE, OCCUPIED).astype(np.int8)
-    passable = states == FREE
-    echoed = states == OCCUPIED  # nothing bumped, nothing past the room box
+    return grid, free_fraction, states, states == FREE, states == OCCUPIED
+
+
+def test_a_cell_only_echoes_hold_occupied_is_probed_when_free_floor_lies_beyond_it() -> None:
+    """The room of ``_room_with_a_closed_gap``: a gap the echoes closed, free floor beyond it."""
+    grid, free_fraction, states, passable, echoed = _room_with_a_closed_gap()
     explorer = Explorer(grid, 1, (2, 0), probe_min_cells=3)
     explorer.visited[:, 0:2] = True
     trav = explorer.traversable(free_fraction)
@@ -646,6 +654,29 @@ def test_a_cell_only_echoes_hold_occupied_is_probed_when_free_floor_lies_beyond_
     free_fraction[3:5, :] = 1.0
     reachable = Explorer(grid, 1, (2, 0), probe_min_cells=3)
     assert reachable.probe((2, 1), reachable.traversable(free_fraction), echoed, free_fraction) is None
+
+
+def test_a_settled_robot_heads_for_a_gap_to_probe_before_walking_on_depth_first() -> None:
+    """The room of the test above, with one explored cell not yet stood in. Walking depth-first the
+    robot steps there first (and, in a large room, on through the rest of it for minutes); once the
+    map has settled with nothing else left to resolve, it drives into the gap instead."""
+    grid, free_fraction, states, passable, echoed = _room_with_a_closed_gap()
+
+    def explorer() -> Explorer:
+        e = Explorer(grid, 1, (2, 0), probe_min_cells=3)
+        e.visited[:, 0:2] = True
+        e.visited[1, 0] = False
+        return e
+
+    walking = explorer().decide((2, 1), 0.0, states, passable, free_fraction, probe_cells=echoed)
+    assert walking.kind == "move" and walking.target == (1, 0) and walking.reason == "explore"
+    settled = explorer()
+    action = settled.decide((2, 1), 0.0, states, passable, free_fraction, seek_frontier=True, probe_cells=echoed)
+    assert action.kind == "move" and action.target == (2, 2) and action.reason == "probe"
+    assert settled.probed == {(2, 2)}
+    # With no gap to probe, a settled robot walks on as before.
+    nothing = explorer().decide((2, 1), 0.0, states, passable, free_fraction, seek_frontier=True)
+    assert nothing.target == (1, 0) and nothing.reason == "explore"
 
 
 def test_a_doorway_narrowed_by_furniture_is_probed_and_the_room_beyond_mapped() -> None:
