@@ -316,7 +316,8 @@ def test_face_cells_past_a_wall_leaning_off_the_box_edge_are_left_to_their_evide
 def test_the_box_face_is_held_free_only_along_edges_where_echoes_found_a_wall() -> None:
     """A room that is not a box meets its box at vertices; along those edges the face cells hold its
     walls. The final map holds the face free along an edge where a wall was found on it, or near
-    where echoes touched it; elsewhere the face cells keep their own evidence."""
+    where echoes touched it and no echoes beside fell short of it; elsewhere the face cells keep
+    their own evidence."""
     from robot.config import RobotConfig
     from robot.mapping.base import MapFrame
     from robot.mapping.logodds import LogOddsMapper
@@ -351,6 +352,35 @@ def test_the_box_face_is_held_free_only_along_edges_where_echoes_found_a_wall() 
     tangents.add([1.52], [0.5], [-math.pi / 2], [0.5])
     assert kept([], 1.525, 0.025) and kept([], 1.575, 0.025)
     assert not kept([], 1.725, 0.025) and not kept([], 0.025, 1.525)
+    # Echoes from beside those places that fell 5 cm short: a wall curving away from the edge
+    # touched it there, and its face cells hold that wall.
+    tangents.add([1.3, 1.7], [0.5, 0.5], [-math.pi / 2] * 2, [0.45, 0.45])
+    assert not kept([], 1.525, 0.025)
+    mapper.params = mapper.params.model_copy(update={"face_short_ratio": 0.0})
+    assert kept([], 1.525, 0.025)
+
+
+def test_touches_of_a_curved_wall_are_not_taken_for_a_flat_one() -> None:
+    """From a row of places 0.5 m above the bottom edge (y = 0), looking down: a flat wall on the
+    edge is touched from every place; a round wall of radius 2 m touching the edge at x = 1.5 only
+    from the places within 25 cm of that point, and the echoes from beside them fall 2-10 cm short."""
+    edge = box_walls((0.0, 0.0, 3.0, 3.0))[3]
+    xs = [round(1.0 + 0.05 * i, 2) for i in range(21)]
+    flat = TangentLines(HALF, TangentParams())
+    flat.add(xs, [0.5] * len(xs), [-math.pi / 2] * len(xs), [0.5] * len(xs))
+    round_wall = TangentLines(HALF, TangentParams())
+    ranges = [2.0 - math.hypot(x - 1.5, 1.5) for x in xs]  # to the circle about (1.5, 2.0)
+    round_wall.add(xs, [0.5] * len(xs), [-math.pi / 2] * len(xs), ranges)
+    assert flat.flush_touches(edge, 0.1, 0.3, 0.5) == pytest.approx(flat.touches(edge))
+    assert flat.touches(edge) == pytest.approx(xs)
+    assert round_wall.touches(edge) == pytest.approx([x for x in xs if abs(x - 1.5) < 0.25])
+    assert round_wall.flush_touches(edge, 0.1, 0.3, 0.5).size == 0
+    # 12 echoes fell short beside the 9 touches: counted only within reach of the stretch, only up
+    # to short_m short, and against the ratio.
+    assert round_wall.flush_touches(edge, 0.1, 0.0, 0.5).size == 9
+    assert round_wall.flush_touches(edge, 0.02, 0.3, 0.5).size == 9
+    assert round_wall.flush_touches(edge, 0.1, 0.3, 12 / 9 + 0.01).size == 9
+    assert round_wall.flush_touches(edge, 0.1, 0.3, 12 / 9 - 0.01).size == 0
 
 
 LEANING_ROOMS = {
@@ -394,8 +424,15 @@ def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips(name: 
     assert cfg.slam.logodds.face_slant_deg < 1.2
     # The face rule alone: walls leaning off the box edge also cut the cells they cross (tested above),
     # which would hide what the face rule does here.
+    # So does telling a leaning wall's touches of the edge from a flat wall's (tested above), which
+    # already keeps the face cells behind the "leaning" room's wall to their own evidence.
     logodds = cfg.slam.logodds
-    logodds = logodds.model_copy(update={"tangents": logodds.tangents.model_copy(update={"box_lean_min_deg": 45.0})})
+    logodds = logodds.model_copy(
+        update={
+            "tangents": logodds.tangents.model_copy(update={"box_lean_min_deg": 45.0}),
+            "face_short_ratio": 0.0,
+        }
+    )
     slam = cfg.slam.model_copy(update={"logodds": logodds})
     off = slam.model_copy(update={"logodds": logodds.model_copy(update={"face_slant_deg": before_deg})})
     kept = simulate(world, cfg.robot, cfg.noise, slam, seed=seed)
@@ -403,6 +440,25 @@ def test_a_wall_leaning_just_inside_the_box_edge_keeps_the_cells_it_clips(name: 
     assert kept.trajectory == lost.trajectory  # only the final map changes
     assert kept.metrics.recall > lost.metrics.recall
     assert kept.metrics.f1 > lost.metrics.f1
+
+
+def test_the_round_rooms_wall_where_it_touches_the_box_is_not_taken_for_the_boxs_face() -> None:
+    """The round room touches its box at four points. The echoes that touched the box edges there
+    held the face cells free as a box wall's, and the cells the wall runs through read white."""
+    from robot.runner import simulate
+    from robot.settings import load_run_config
+    from robot.world import builtin_worlds, load_world
+
+    world = load_world(builtin_worlds()["roundroom"])
+    cfg = load_run_config()
+    assert cfg.slam.logodds.face_short_ratio > 0.0 and cfg.slam.logodds.face_min_touches > 0
+    off = cfg.slam.model_copy(update={"logodds": cfg.slam.logodds.model_copy(update={"face_short_ratio": 0.0})})
+    kept = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=2)
+    taken = simulate(world, cfg.robot, cfg.noise, off, seed=2)
+    assert kept.trajectory == taken.trajectory  # only the final map changes
+    assert kept.metrics.recall > taken.metrics.recall
+    assert kept.metrics.precision == taken.metrics.precision == 1.0
+    assert kept.metrics.f1 > taken.metrics.f1 + 0.02
 
 
 def test_trimmed_ends_are_numpys_percentiles() -> None:

@@ -309,11 +309,41 @@ class TangentLines:
     def touches(self, line: Line) -> NDArray[np.float64]:
         """Where along ``line`` the echoes tangent to it (within ``tolerance_m``, inside their cone)
         touch it, in increasing order."""
+        along, short = self._against(line)
+        return np.sort(along[np.abs(short) <= self.params.tolerance_m])
+
+    def flush_touches(self, line: Line, short_m: float, reach_m: float, max_ratio: float) -> NDArray[np.float64]:
+        """``touches(line)`` without the stretches that a wall curving or leaning away from the line
+        touched: stretches (split where no echo touched the line for ``max_gap_m``) within
+        ``reach_m`` of which the echoes that fell between ``tolerance_m`` and ``short_m`` short of
+        the line number ``max_ratio`` of the stretch's touches or more.
+
+        A flat wall on the line is touched from wherever the robot faces it, and echoes fall short
+        of it only by their range noise; a curved wall, or one meeting the line at a vertex, is
+        touched only where it reaches the line, and echoes from beside that stretch fall a few
+        centimetres short."""
+        along, short = self._against(line)
+        tol = self.params.tolerance_m
+        touched = np.sort(along[np.abs(short) <= tol])
+        if touched.size == 0:
+            return touched
+        fell_short = np.sort(along[(short > tol) & (short <= short_m)])
+        kept = []
+        for piece in np.split(touched, np.flatnonzero(np.diff(touched) > self.params.max_gap_m) + 1):
+            first = np.searchsorted(fell_short, piece[0] - reach_m)
+            count = np.searchsorted(fell_short, piece[-1] + reach_m, side="right") - first
+            if count < max_ratio * piece.size:
+                kept.append(piece)
+        return np.concatenate(kept) if kept else touched[:0]
+
+    def _against(self, line: Line) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """For the echoes whose cone holds ``line``'s normal: where along the line each would touch
+        it, and how far short of the line its tangent falls [m] (negative past it)."""
         self._gather()
         c, s = math.cos(line.theta), math.sin(line.theta)
-        dist = c * self._x + s * self._y + self._r
-        near = (_off(line.theta, self._axis) <= self.half) & (np.abs(dist - line.d) <= self.params.tolerance_m)
-        return np.sort(line.along_many(self._x[near] + self._r[near] * c, self._y[near] + self._r[near] * s))
+        facing = _off(line.theta, self._axis) <= self.half
+        x, y, r = self._x[facing], self._y[facing], self._r[facing]
+        return line.along_many(x + r * c, y + r * s), line.d - (c * x + s * y + r)
 
     def near_box(self, line: Line, extent: tuple[float, float, float, float]) -> bool:
         """Whether ``line`` runs along an edge of the room box (within ``same_deg`` and ``same_m``)."""
