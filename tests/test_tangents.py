@@ -517,3 +517,22 @@ def test_the_search_over_turns_picks_the_line_a_turn_by_turn_search_picks() -> N
             assert got[0] == expected[0] and got[1] == expected[1]
             assert np.array_equal(got[2], expected[2])
     assert tried >= 9
+
+
+def test_two_lines_are_near_when_they_run_close_over_the_touched_stretch() -> None:
+    """A wall found a few degrees off a box edge, far from the origin, runs within centimetres of
+    the edge where the echoes touched it although its distance from the origin differs by 26 cm."""
+    edge = Line(theta=0.0, d=4.0, s0=-math.inf, s1=math.inf, echoes=0, scatter=0.0)  # x = 4
+    theta = math.radians(3.0)
+    d = 4.03 * math.cos(theta) + 4.5 * math.sin(theta)  # through (4.03, 4.5)
+    seen = Line(theta=theta, d=d, s0=0.0, s1=0.0, echoes=20, scatter=0.01)
+    touched = replace(seen, s0=seen.along(4.0563, 4.0), s1=seen.along(4.0038, 5.0))
+    turn = math.radians(4.0)
+    assert abs(d - edge.d) > 0.25
+    assert touched.near(edge, turn, 0.1)
+    # The same line touched all the way down to y = 0 runs 27 cm off the edge there.
+    assert not replace(touched, s0=touched.along(4.266, 0.0)).near(edge, turn, 0.1)
+    # Nor is it near when it turns farther than allowed.
+    assert not touched.near(edge, math.radians(2.0), 0.1)
+    # A line with no bounded stretch is compared by its distance from the origin.
+    assert edge.near(replace(edge, d=4.08), turn, 0.1) and not edge.near(replace(edge, d=4.12), turn, 0.1)

@@ -159,12 +159,14 @@ class Line:
         return self.d * c - s * si, self.d * si + s * c
 
     def near(self, other: Line, turn_rad: float, distance_m: float) -> bool:
-        """Whether ``other`` runs within ``turn_rad`` of this line's direction and ``distance_m`` of
-        its distance from the origin."""
-        return (
-            abs(math.remainder(self.theta - other.theta, 2 * math.pi)) <= turn_rad
-            and abs(self.d - other.d) <= distance_m
-        )
+        """Whether ``other`` runs within ``turn_rad`` of this line's direction and within
+        ``distance_m`` of it over this line's touched stretch (both ends; at the origin when the
+        stretch is unbounded)."""
+        if abs(math.remainder(self.theta - other.theta, 2 * math.pi)) > turn_rad:
+            return False
+        if not (math.isfinite(self.s0) and math.isfinite(self.s1)):
+            return abs(self.d - other.d) <= distance_m
+        return all(abs(other.depth_at(*self.point(s))) <= distance_m for s in (self.s0, self.s1))
 
     def corner_reach(self, half: float) -> float:
         """How far the corners of a cell of side ``2 * half`` reach from its centre across the line."""
