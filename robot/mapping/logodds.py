@@ -53,6 +53,13 @@ class LogOddsParams(BaseModel):
     carve_max_m: float = Field(default=2.0, gt=0.0)  # ... fading to zero here
     no_echo_carve_m: float = Field(default=0.0, ge=0.0)  # how far a no-echo reading clears ...
     no_echo_weight: float = Field(default=0.5, ge=0.0, le=1.0)  # ... and how strongly
+    # ... but in a sweep that maps no echo at all, where the room's surveyed box lies beyond the
+    # sonar's range across the whole cone, no wall of the room can have turned the ping away: a
+    # no-echo reading there clears its first open_carve_m. Without it a robot that starts in a hall
+    # more than the sonar's range from every wall hears nothing, none of its floor becomes free, and
+    # the run ends at once with an empty map (a 14 x 11 m hall started in its middle: 20 steps,
+    # F1 0.008). 0 turns this off.
+    open_carve_m: float = Field(default=1.0, ge=0.0)
     max_echo_range_m: float = Field(default=2.0, gt=0.0)  # echoes beyond this are not mapped
     occ_full_m: float = Field(default=0.6, gt=0.0)  # full occupied weight up to here, then fading
     occ_far_weight: float = Field(default=0.3, ge=0.0, le=1.0)  # ... to this at max_echo_range_m
@@ -298,6 +305,11 @@ class LogOddsMapper:
         res = self.fine.resolution
         beams = place_beams(pose, ranges_m, self.robot)
         free_to, reach, mapped = [], [], []
+        # A sweep without an echo it maps: nothing stands within that range in any direction (with
+        # beams 45 degrees apart, a face near the robot turns towards one of them).
+        quiet = p.open_carve_m > p.no_echo_carve_m and not any(
+            b.echo and b.range_m <= p.max_echo_range_m for b in beams
+        )
         for beam in beams:
             r = beam.range_m
             if beam.echo and r <= p.max_echo_range_m:
@@ -309,13 +321,40 @@ class LogOddsMapper:
                 free_to.append(min(r - p.free_margin_m - p.free_margin_frac * r, p.carve_max_m))
                 reach.append(free_to[-1])
             else:
-                free_to.append(min(p.no_echo_carve_m, r))
+                carve = p.no_echo_carve_m
+                if quiet and self._box_out_of_range(beam):
+                    carve = p.open_carve_m
+                free_to.append(min(carve, r))
                 reach.append(free_to[-1])
             mapped.append(beam.echo and r <= p.max_echo_range_m)
         found = cones(self.fine, beams, self._half, reach, p.aperture_m)
         sizes = np.diff(found.starts)
         ang = (found.cells.off_axis_rad / self._half) ** 2
         return _SweepCones(beams, found, sizes, ang, free_to, mapped)
+
+    def _box_out_of_range(self, beam: Beam) -> bool:
+        """Whether every wall of the room's surveyed box lies farther than the sonar's range from the
+        transducer, anywhere across the beam's cone (False when the room's size is unknown)."""
+        extent = self.frame.extent
+        if extent is None:
+            return False
+        min_x, min_y, max_x, max_y = extent
+        reach = self.robot.sonar.max_range_m
+        # Each box wall's distance d along its outward normal (at angle phi); along a direction off
+        # the normal by delta the wall is d / cos(delta) away, nearest where delta is smallest.
+        for d, phi in (
+            (max_x - beam.x, 0.0),
+            (beam.y - min_y, -0.5 * math.pi),
+            (beam.x - min_x, math.pi),
+            (max_y - beam.y, 0.5 * math.pi),
+        ):
+            if d >= reach:
+                continue
+            delta = abs(math.remainder(phi - beam.axis_rad, 2.0 * math.pi))
+            delta = max(delta - self._half, 0.0)
+            if delta < 0.5 * math.pi and d < reach * math.cos(delta):
+                return False
+        return True
 
     def _clear(self, sweep: _SweepCones, L: NDArray[np.float32], F: NDArray[np.float32], front_m: float = 0.0) -> None:
         """Add the free evidence of ``sweep``'s cones to ``F``, where belief ``L`` does not hide them
