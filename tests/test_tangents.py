@@ -383,6 +383,33 @@ def test_touches_of_a_curved_wall_are_not_taken_for_a_flat_one() -> None:
     assert round_wall.flush_touches(edge, 0.1, 0.3, 12 / 9 - 0.01).size == 0
 
 
+def test_echoes_past_the_voting_range_touch_a_box_edge_the_close_ones_did_not_reach() -> None:
+    """A robot that mapped a wall's floor from 1.8 m away and never drove closer: those echoes do not
+    vote for lines, but they touch the edge, and hold its face. Beside a stretch the close echoes
+    rejected (a curved wall), they do not."""
+    edge = box_walls((0.0, 0.0, 3.0, 3.0))[3]  # y = 0
+    xs = [round(0.2 + 0.2 * i, 2) for i in range(13)]  # one sweep every 20 cm
+    far = TangentLines(HALF, TangentParams())
+    far.add(xs, [1.8] * len(xs), [-math.pi / 2] * len(xs), [1.8] * len(xs))
+    assert far.lines() == []  # too far to vote
+    assert far.touches(edge) == pytest.approx(xs)
+    assert far.flush_touches(edge, 0.1, 0.3, 0.5) == pytest.approx(xs)
+    # Past touch_range_m they count for nothing.
+    beyond = TangentLines(HALF, TangentParams(touch_range_m=1.7))
+    beyond.add(xs, [1.8] * len(xs), [-math.pi / 2] * len(xs), [1.8] * len(xs))
+    assert beyond.touches(edge).size == 0
+    # Close echoes of a wall curving away from the edge at x = 1.5 (as in the test below) reject
+    # their stretch, and the far touches near it go with it; those farther along still count.
+    near_xs = [round(1.0 + 0.05 * i, 2) for i in range(21)]
+    curved = TangentLines(HALF, TangentParams())
+    curved.add(
+        near_xs, [0.5] * len(near_xs), [-math.pi / 2] * len(near_xs), [2.0 - math.hypot(x - 1.5, 1.5) for x in near_xs]
+    )
+    curved.add(xs, [1.8] * len(xs), [-math.pi / 2] * len(xs), [1.8] * len(xs))
+    kept = curved.flush_touches(edge, 0.1, 0.3, 0.5)
+    assert kept == pytest.approx([x for x in xs if x < 0.7 or x > 2.3])
+
+
 LEANING_ROOMS = {
     # A left wall 2.4 degrees off the box edge, up to 12 cm inside it.
     "leaning": (

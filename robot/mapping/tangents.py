@@ -37,6 +37,12 @@ class TangentParams(BaseModel):
     theta_step_deg: float = Field(default=1.0, ge=0.25, le=10.0)  # accumulator bin, normal direction
     d_step_m: float = Field(default=0.02, ge=0.005)  # accumulator bin, distance
     max_range_m: float = Field(default=1.5, gt=0.0)  # only echoes this short vote
+    # ... but echoes up to touch_range_m count where they touch a box edge (``touches``): a robot
+    # that mapped a box wall's floor from farther than max_range_m away and never drove closer would
+    # otherwise leave the edge untouched, and the final map would not hold its face free (a 7 x 5 m
+    # room at 0.1 m, seed 1: the right wall's cells black down the last column, F1 0.769 -> 0.857).
+    # 34 worlds at 0.2 m (seed 0) and 0.1 m (seeds 0 and 1): no other run changed.
+    touch_range_m: float = Field(default=2.0, gt=0.0)
     min_votes: float = Field(default=15.0, gt=0.0)  # a line needs this many echoes ...
     min_places: int = Field(default=3, ge=2)  # ... from this many places (5 cm apart) ...
     min_length_m: float = Field(default=0.15, ge=0.0)  # ... touching it over this length
@@ -238,13 +244,18 @@ class TangentLines:
         self.n_theta = max(1, round(2 * math.pi / self._step))
         self._chunks: list[NDArray[np.float64]] = []  # per sweep: rows x, y, axis, range
         self._x = self._y = self._axis = self._r = self._norm = np.zeros(0)
+        self._far_chunks: list[NDArray[np.float64]] = []  # the same, past max_range_m to touch_range_m
+        self._far = np.zeros((4, 0))
 
     def add(self, xs: list[float], ys: list[float], axes: list[float], ranges: list[float]) -> None:
         """One sweep's echoes: transducer positions [m], beam axes [rad] and ranges [m]."""
         echoes = np.array([xs, ys, axes, ranges], dtype=np.float64).reshape(4, -1)
-        echoes = echoes[:, echoes[3] <= self.params.max_range_m]
-        if echoes.shape[1]:
-            self._chunks.append(echoes)
+        short = echoes[3] <= self.params.max_range_m
+        if short.any():
+            self._chunks.append(echoes[:, short])
+        far = ~short & (echoes[3] <= self.params.touch_range_m)
+        if far.any():
+            self._far_chunks.append(echoes[:, far])
 
     def _gather(self) -> int:
         """Join the sweeps' echoes into one array per quantity; returns how many there are."""
@@ -310,9 +321,11 @@ class TangentLines:
 
     def touches(self, line: Line) -> NDArray[np.float64]:
         """Where along ``line`` the echoes tangent to it (within ``tolerance_m``, inside their cone)
-        touch it, in increasing order."""
+        touch it, in increasing order (echoes up to ``touch_range_m``)."""
         along, short = self._against(line)
-        return np.sort(along[np.abs(short) <= self.params.tolerance_m])
+        far_along, far_short = self._against(line, far=True)
+        tol = self.params.tolerance_m
+        return np.sort(np.concatenate([along[np.abs(short) <= tol], far_along[np.abs(far_short) <= tol]]))
 
     def flush_touches(self, line: Line, short_m: float, reach_m: float, max_ratio: float) -> NDArray[np.float64]:
         """``touches(line)`` without the stretches that a wall curving or leaning away from the line
@@ -323,28 +336,49 @@ class TangentLines:
         A flat wall on the line is touched from wherever the robot faces it, and echoes fall short
         of it only by their range noise; a curved wall, or one meeting the line at a vertex, is
         touched only where it reaches the line, and echoes from beside that stretch fall a few
-        centimetres short."""
+        centimetres short.
+
+        The echoes that vote for lines (up to ``max_range_m``) decide this. The longer ones (to
+        ``touch_range_m``) are too noisy, and too much affected by a heading error, to tell a flat
+        wall by how many fall short: each of their touches counts within ``reach_m`` of a touch
+        kept, or where no close echo within ``reach_m`` came within ``short_m`` of the line."""
         along, short = self._against(line)
         tol = self.params.tolerance_m
         touched = np.sort(along[np.abs(short) <= tol])
-        if touched.size == 0:
-            return touched
-        fell_short = np.sort(along[(short > tol) & (short <= short_m)])
+        near = np.sort(along[(short >= -short_m) & (short <= short_m)])  # what the close echoes saw
         kept = []
-        for piece in np.split(touched, np.flatnonzero(np.diff(touched) > self.params.max_gap_m) + 1):
-            first = np.searchsorted(fell_short, piece[0] - reach_m)
-            count = np.searchsorted(fell_short, piece[-1] + reach_m, side="right") - first
-            if count < max_ratio * piece.size:
-                kept.append(piece)
-        return np.concatenate(kept) if kept else touched[:0]
+        if touched.size:
+            fell_short = np.sort(along[(short > tol) & (short <= short_m)])
+            for piece in np.split(touched, np.flatnonzero(np.diff(touched) > self.params.max_gap_m) + 1):
+                first = np.searchsorted(fell_short, piece[0] - reach_m)
+                count = np.searchsorted(fell_short, piece[-1] + reach_m, side="right") - first
+                if count < max_ratio * piece.size:
+                    kept.append(piece)
+        flush = np.concatenate(kept) if kept else touched[:0]
+        far_along, far_short = self._against(line, far=True)
+        far = np.sort(far_along[np.abs(far_short) <= tol])
+        if far.size:
+            lo, hi = far - reach_m, far + reach_m
+            beside = np.searchsorted(flush, hi, side="right") > np.searchsorted(flush, lo)
+            unseen = np.searchsorted(near, hi, side="right") == np.searchsorted(near, lo)
+            kept.append(far[beside | unseen])
+        return np.sort(np.concatenate(kept)) if kept else touched[:0]
 
-    def _against(self, line: Line) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def _against(self, line: Line, far: bool = False) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """For the echoes whose cone holds ``line``'s normal: where along the line each would touch
-        it, and how far short of the line its tangent falls [m] (negative past it)."""
-        self._gather()
+        it, and how far short of the line its tangent falls [m] (negative past it). With ``far``,
+        the echoes past ``max_range_m`` up to ``touch_range_m`` instead of those that vote."""
+        if far:
+            if self._far_chunks:
+                self._far = np.concatenate([self._far, *self._far_chunks], axis=1)
+                self._far_chunks.clear()
+            xs, ys, axes, ranges = self._far
+        else:
+            self._gather()
+            xs, ys, axes, ranges = self._x, self._y, self._axis, self._r
         c, s = math.cos(line.theta), math.sin(line.theta)
-        facing = _off(line.theta, self._axis) <= self.half
-        x, y, r = self._x[facing], self._y[facing], self._r[facing]
+        facing = _off(line.theta, axes) <= self.half
+        x, y, r = xs[facing], ys[facing], ranges[facing]
         return line.along_many(x + r * c, y + r * s), line.d - (c * x + s * y + r)
 
     def near_box(self, line: Line, extent: tuple[float, float, float, float]) -> bool:
