@@ -346,11 +346,11 @@ def test_the_box_face_is_held_free_only_along_edges_where_echoes_found_a_wall() 
     leaning = Line(theta=math.pi + math.radians(1.2), d=0.01, s0=-2.0, s1=-1.0, echoes=40, scatter=0.01)
     assert not kept([leaning], 0.025, 1.525)
     # Two echoes that touched the bottom edge at x = 1.5 (from 0.5 m above it, looking down) hold
-    # its face within 10 cm of there; one echo does not.
+    # its face within 20 cm of there (two sweeps a step apart); one echo does not.
     tangents.add([1.5], [0.5], [-math.pi / 2], [0.5])
     assert not kept([], 1.525, 0.025)
     tangents.add([1.52], [0.5], [-math.pi / 2], [0.5])
-    assert kept([], 1.525, 0.025) and kept([], 1.575, 0.025)
+    assert kept([], 1.525, 0.025) and kept([], 1.575, 0.025) and kept([], 1.675, 0.025)
     assert not kept([], 1.725, 0.025) and not kept([], 0.025, 1.525)
     # Echoes from beside those places that fell 5 cm short: a wall curving away from the edge
     # touched it there, and its face cells hold that wall.
