@@ -287,6 +287,21 @@ def test_cones_that_ran_on_through_a_surface_found_later_clear_nothing_behind_it
     assert np.array_equal(kept[:, : face_col + 1], cleared[:, : face_col + 1])  # the room side is the same
 
 
+def test_the_final_pass_gives_the_same_map_from_kept_cones_as_from_cones_worked_out_again() -> None:
+    """The final pass reuses the cones each sweep's integration worked out while they fit in
+    ``final_cache_mb``; a budget that holds none, or only some, makes the same map."""
+    cfg = load_run_config(None, {})
+    world = load_world("room2")
+
+    def final_states(cache_mb: float) -> NDArray[np.int8]:
+        params = cfg.slam.logodds.model_copy(update={"final_cache_mb": cache_mb})
+        return simulate(world, cfg.robot, cfg.noise, cfg.slam.model_copy(update={"logodds": params}), seed=1).states
+
+    kept = final_states(64.0)
+    assert np.array_equal(kept, final_states(0.0))
+    assert np.array_equal(kept, final_states(2.0))  # some sweeps kept, the rest worked out again
+
+
 def test_the_final_pass_keeps_the_strip_just_in_front_of_a_solid_cell_a_beam_ran_on_past() -> None:
     """A beam that meets a face at a slant may hear nothing from it (a specular miss) and run on
     past it, clearing the strip in front of the solid cells: where the face cuts a few centimetres

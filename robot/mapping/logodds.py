@@ -31,7 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from robot.config import RobotConfig
 from robot.grid import FREE, OCCUPIED, UNKNOWN, GridSpec, dilate8
 from robot.mapping.base import Evidence, MapFrame, blocked_by_extent
-from robot.mapping.geometry import Beam, Cones, cones, place_beams
+from robot.mapping.geometry import Beam, ConeCells, Cones, cones, place_beams
 from robot.mapping.tangents import Line, TangentLines, TangentParams, box_walls, meet_at_corners
 from robot.world import Pose
 
@@ -152,6 +152,10 @@ class LogOddsParams(BaseModel):
     # cell (1.0) hid the cells in front of faces on cell boundaries: 85 worlds (seed 0) 0.9838 ->
     # 0.9833, openhall -0.043. 0.95 scored as 0.9 on the paper's rooms, 0.8 less than half of it.
     final_front_cells: float = Field(default=0.9, ge=0.0, le=2.0)
+    # The final pass reuses each sweep's cones, kept from its integration while they fit in this
+    # much memory (about 60 kB a sweep in a paper room, up to 300 kB in a hall; 0 keeps none);
+    # sweeps past it have their cones worked out again. The map is the same either way.
+    final_cache_mb: float = Field(default=64.0, ge=0.0)
     tangents: TangentParams = TangentParams()  # straight walls from the lines echoes are tangent to
 
 
@@ -230,6 +234,43 @@ class _SweepCones(NamedTuple):
     mapped: list[bool]  # each beam has an echo placed on the map
 
 
+FINAL_BATCH_SWEEPS = 32  # sweeps cleared together in the final pass
+
+
+def _cones_bytes(sweep: _SweepCones) -> int:
+    c = sweep.found.cells
+    arrays = (c.rows, c.cols, c.dist_m, c.off_axis_rad, c.inset_m, sweep.ang, sweep.sizes, sweep.found.starts)
+    return sum(a.nbytes for a in arrays)
+
+
+def _joined(sweeps: list[_SweepCones]) -> _SweepCones:
+    """Several sweeps' cones as one sweep's, beam after beam."""
+    if len(sweeps) == 1:
+        return sweeps[0]
+    cells = [s.found.cells for s in sweeps]
+    offsets = np.cumsum([0] + [s.found.starts[-1] for s in sweeps[:-1]])
+    later = [s.found.starts[1:] + o for s, o in zip(sweeps, offsets, strict=True)]
+    starts = np.concatenate([sweeps[0].found.starts[:1], *later])
+    found = Cones(
+        ConeCells(
+            rows=np.concatenate([c.rows for c in cells]),
+            cols=np.concatenate([c.cols for c in cells]),
+            dist_m=np.concatenate([c.dist_m for c in cells]),
+            off_axis_rad=np.concatenate([c.off_axis_rad for c in cells]),
+            inset_m=np.concatenate([c.inset_m for c in cells]),
+        ),
+        starts,
+    )
+    return _SweepCones(
+        [b for s in sweeps for b in s.beams],
+        found,
+        np.concatenate([s.sizes for s in sweeps]),
+        np.concatenate([s.ang for s in sweeps]),
+        [f for s in sweeps for f in s.free_to],
+        [m for s in sweeps for m in s.mapped],
+    )
+
+
 class LogOddsMapper:
     name = "logodds"
 
@@ -254,7 +295,10 @@ class LogOddsMapper:
         self._inner = (slice(pad, pad + grid.rows * self.k), slice(pad, pad + grid.cols * self.k))
         self.free_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # <= 0
         self._body_free = np.zeros(self.fine.shape, dtype=np.float32)  # the body marks' part of it, unclamped
-        self._kept: list[tuple[Pose, NDArray[np.float64]]] = []  # every sweep, with final_occlusion
+        # Every sweep, with final_occlusion: its cones while they fit in final_cache_mb, else its
+        # pose and ranges to work them out again.
+        self._kept: list[_SweepCones | tuple[Pose, NDArray[np.float64]]] = []
+        self._kept_bytes = 0
         self._finalized = False  # finalize() has run: the export rules apply
         self.contact_evidence = np.zeros(self.fine.shape, dtype=np.float32)  # >= 0
         self._arcs = _ArcStore(self.fine.rows * self.fine.cols)
@@ -391,7 +435,12 @@ class LogOddsMapper:
         res = self.fine.resolution
         sweep = self._sweep_cones(pose, ranges_m)
         if p.final_occlusion:
-            self._kept.append((pose, np.array(ranges_m, dtype=np.float64)))
+            size = _cones_bytes(sweep)
+            if self._kept_bytes + size <= p.final_cache_mb * 1e6:
+                self._kept.append(sweep)
+                self._kept_bytes += size
+            else:
+                self._kept.append((pose, np.array(ranges_m, dtype=np.float64)))
         self._clear(sweep, self.logodds, self.free_evidence)  # occluded by the belief before this sweep
         beams, found, sizes, ang, mapped = sweep.beams, sweep.found, sweep.sizes, sweep.ang, sweep.mapped
         cells = found.cells
@@ -647,8 +696,17 @@ class LogOddsMapper:
             L = self.logodds
             F = self._body_free.copy()
             front = self.params.final_front_cells * self.fine.resolution
-            for pose, ranges in self._kept:
-                self._clear(self._sweep_cones(pose, ranges), L, F, front)
+            # A batch of sweeps at a time, cleared as one: the free weights are never positive, so
+            # clamping once per batch gives what clamping after every sweep would.
+            batch: list[_SweepCones] = []
+            for kept in self._kept:
+                batch.append(kept if isinstance(kept, _SweepCones) else self._sweep_cones(*kept))
+                if len(batch) == FINAL_BATCH_SWEEPS:
+                    self._clear(_joined(batch), L, F, front)
+                    batch = []
+            if batch:
+                self._clear(_joined(batch), L, F, front)
+            self._kept, self._kept_bytes = [], 0
             self.free_evidence = np.maximum(F, self.params.free_clamp)
             self._update_support(full=True)
         if self._tangents is not None:
