@@ -750,13 +750,18 @@ class LogOddsMapper:
                 self._wall_face = self._wall_face | self._in_front_of_walls(inside + off_edge, walls)
             self._changed(occupied=False)
 
+    def _inner_centres(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The x of each column and the y of each row of the evidence cells over the map's area, as a
+        row and a column (they broadcast to the cells' centres)."""
+        rows, cols = self._inner
+        return self._centre_x[None, cols], self._centre_y[rows, None]
+
     def _in_front_of_walls(self, walls: list[Line], others: list[Line]) -> NDArray[np.bool_]:
         """Evidence cells of the map's area whose centres lie between ``inner_face_clear_m`` and
         ``inner_face_band_m`` in front of one of ``walls`` over its touched stretch, and not on or
         past any of ``others`` (where two faces meet in a concave corner)."""
         p = self.params
-        rows, cols = self._inner
-        xs, ys = self._centre_x[None, cols], self._centre_y[rows, None]
+        xs, ys = self._inner_centres()
         out = np.zeros(self._face_band.shape, dtype=bool)
         for wall in walls:
             if wall.off_axis_rad > math.radians(p.inner_face_max_deg):
@@ -785,8 +790,7 @@ class LogOddsMapper:
         edge), or within ``face_touch_window_m`` of where ``face_min_touches`` echoes touched it
         (on a stretch that no curved or slanting wall touched, when ``face_short_ratio`` is set)."""
         p = self.params
-        rows, cols = self._inner
-        xs, ys = self._centre_x[None, cols], self._centre_y[rows, None]
+        xs, ys = self._inner_centres()
         min_x, min_y, max_x, max_y = extent
         m = p.extent_snap_m
         bands = (xs > max_x - m, ys > max_y - m, xs < min_x + m, ys < min_y + m)  # box_walls' order
@@ -814,8 +818,7 @@ class LogOddsMapper:
         In a room that is not a box, such a wall meets the box edge at a vertex and runs a few
         centimetres inside it; the face cells behind it are not the outer wall's face, and are left
         to their own evidence. The walls of the box, found from echoes, run within a degree of it."""
-        rows, cols = self._inner
-        xs, ys = self._centre_x[None, cols], self._centre_y[rows, None]
+        xs, ys = self._inner_centres()
         past = np.zeros(self._face_band.shape, dtype=bool)
         half = 0.5 * self.fine.resolution
         for wall in walls:
@@ -829,8 +832,7 @@ class LogOddsMapper:
         the room box's own) cut into (``margin_m`` past them, by default the tangents' margin for the
         wall's angle), except where the robot's body has been on the far side of the wall (then it is
         not a wall there: a doorway, say)."""
-        rows, cols = self._inner
-        xs, ys, body = self._centre_x[None, cols], self._centre_y[rows, None], self._body[self._inner]
+        (xs, ys), body = self._inner_centres(), self._body[self._inner]
         cut = np.zeros(self.frame.grid.shape, dtype=bool)
         for wall in walls:
             cells = tangents.cut_cells(self.frame.grid, [wall], margin_m)
