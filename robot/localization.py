@@ -14,7 +14,6 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -71,6 +70,10 @@ class DeadReckoning:
 
     def __init__(self, robot: RobotConfig, start: Pose, config: LocalizationConfig | None = None) -> None:
         self.robot = robot
+        # filterpy's package pulls in scipy.stats (about half a second): imported here rather than with
+        # this module, so that the command line and the service can check their input before it.
+        from filterpy.kalman import KalmanFilter
+
         self.config = cfg = config or LocalizationConfig()
         self._kf = KalmanFilter(dim_x=3, dim_z=2)
         kf = self._kf

@@ -4,6 +4,8 @@ tabulated with mean and worst case, and drawn as the paper's Figures 7 and 8."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -116,6 +118,19 @@ def test_human_table_and_one_line_errors(evaluated, tmp_path: Path, capsys: pyte
     assert main(["evaluate", str(tmp_path / "missing.toml")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "missing.toml" in err
+
+
+def test_bad_input_is_reported_before_the_filter_library_loads() -> None:
+    # filterpy pulls in scipy.stats, about half a second: a mistyped world or setting is named first.
+    code = (
+        "import sys\n"
+        "from robot.cli import main\n"
+        "codes = [main(['run', '--world', 'nosuch']), main(['run', '--world', 'room1', '--resolution', '0.01'])]\n"
+        "print(codes, 'filterpy' in sys.modules, 'scipy.stats' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert done.stdout.split() == ["[2,", "2]", "False", "False"]
+    assert "nosuch" in done.stderr and "resolution = 0.01" in done.stderr
 
 
 def test_a_setting_given_on_the_command_line_is_named_in_its_error(capsys: pytest.CaptureFixture[str]) -> None:
