@@ -20,6 +20,14 @@ TERMINAL = {"finished", "stopped", "error", "interrupted"}
 T = TypeVar("T")
 
 
+def wait_for(predicate: Callable[[], object], timeout_s: float = 60.0) -> None:
+    """Poll ``predicate`` every 50 ms until it is true; fail the test after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert time.monotonic() < deadline, "condition not reached in time"
+        time.sleep(0.05)
+
+
 def wait_ended(api: Any, run_id: str, timeout_s: float = 90.0) -> dict[str, Any]:
     """Poll ``GET /api/runs/{id}`` (``api``: an httpx client on the service) until the run has ended."""
     deadline = time.monotonic() + timeout_s

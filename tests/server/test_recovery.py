@@ -8,21 +8,13 @@ import signal
 import time
 import zipfile
 from pathlib import Path
-from typing import Any
 
 import httpx
 import numpy as np
-from live_client import csv_codes, run_async, watch
+from live_client import csv_codes, run_async, wait_for, watch
 from service_process import serve_process
 
 from robot.sensorlog import read_sensor_log
-
-
-def wait_for(predicate: Any, timeout_s: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.05)
 
 
 def test_kill_9_mid_run_then_restart(tmp_path: Path) -> None:

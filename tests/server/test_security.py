@@ -8,7 +8,7 @@ from typing import Any
 
 import httpx
 import pytest
-from live_client import run_async, watch
+from live_client import run_async, wait_for, watch
 from live_server import LiveServer, isolated_settings
 from pydantic import SecretStr
 from websockets.exceptions import InvalidStatus
@@ -42,7 +42,8 @@ def control_requests(client: httpx.Client, run_id: str) -> dict[str, httpx.Respo
 def test_control_endpoints_refuse_requests_without_the_token(make_server: Any) -> None:
     server: LiveServer = make_server(token=TOKEN)
     with server.client(TOKEN) as owner:
-        run_id = owner.post("/api/runs", json={**FAST, "max_steps": 5000}).json()["id"]
+        # A slow run, so that it is still running when the owner changes its speed and stops it.
+        run_id = owner.post("/api/runs", json={**FAST, "speed": 10.0, "max_steps": 5000}).json()["id"]
         for who in (server.client(), server.client("wrong-token-123")):
             with who:
                 for name, response in control_requests(who, run_id).items():
@@ -51,9 +52,10 @@ def test_control_endpoints_refuse_requests_without_the_token(make_server: Any) -
                 # Viewing stays open unless configured otherwise.
                 assert who.get("/api/runs").status_code == 200
                 assert who.get(f"/api/runs/{run_id}/map.csv").status_code == 200
-        # Nobody stopped it: it still runs, or still waits for the engine's process to start (on a
-        # busy machine the first run's child can take over a second).
-        assert owner.get(f"/api/runs/{run_id}").json()["status"] in ("queued", "running")
+        # Nobody stopped it. On a busy machine the engine's first child process can take over a
+        # second to start, so wait until the run has left the queue; then it must be running.
+        wait_for(lambda: owner.get(f"/api/runs/{run_id}").json()["status"] != "queued", timeout_s=30)
+        assert owner.get(f"/api/runs/{run_id}").json()["status"] == "running"
         # Only the header counts for control: a token in the query string is not enough.
         assert server.client().post(f"/api/runs/{run_id}/stop?token={TOKEN}").status_code == 401
         allowed = control_requests(owner, run_id)
