@@ -12,7 +12,10 @@ good (in a large hall the heading drifts during long crossings of open floor). `
 the gate with the distance driven since an axis's last fix; a reading past the fixed gate counts
 only when the edge's last such readings, taken along a stretch of it, agree on one offset, as a
 drifted estimate makes them, and not on offsets that change along the edge, as an angled wall near
-the edge does.
+the edge does. A reading that puts the wall beyond the box edge, where no wall of the room can be,
+says that the estimate has drifted towards the room's inside: its gate grows further
+(``outside_gate_m``), and it needs only that agreement, not the map, which a drifted estimate drew
+with the wall where the drift put it.
 """
 
 from __future__ import annotations
@@ -43,6 +46,11 @@ class BoxFixConfig(BaseModel):
     # (see DriftGate; a growth of 0 keeps the gate fixed) ...
     gate_growth: float = Field(default=0.02, ge=0.0)
     max_gate_m: float = Field(default=0.15, gt=0.0)
+    # ... except for readings that put the wall beyond the box edge, where no wall of the room can be:
+    # their gate grows the same way up to outside_gate_m, and past gate_m they need no map check,
+    # only the agreement along the edge below (the map drawn by a drifted estimate shows the wall
+    # where the drift put it, so it cannot confirm the edge; 0 turns this off).
+    outside_gate_m: float = Field(default=0.5, ge=0.0)
     # ... and a reading past gate_m counts only when the edge's last wide_readings such readings span
     # wide_span_m along it and lie on a line within wide_rms_m whose slope is at most wide_max_slope.
     wide_readings: int = Field(default=6, ge=3)
@@ -208,6 +216,11 @@ class DriftGate:
         c = self.config
         return min(c.max_gate_m, c.gate_m + c.gate_growth * self.travel[axis])
 
+    def outside_limit(self, axis: int) -> float:
+        """The gate for readings along ``axis`` that put the wall beyond the box edge [m]."""
+        c = self.config
+        return min(max(c.max_gate_m, c.outside_gate_m), c.gate_m + c.gate_growth * self.travel[axis])
+
     def fixed(self, axis: int, remaining_m: float) -> None:
         """A fix along ``axis`` that leaves ``remaining_m`` of its offset to later sweeps: the gate
         stays wide enough for that, with 2 cm to spare, so that a fix past the fixed gate can finish
@@ -303,11 +316,19 @@ def box_offsets(
                 offset = edge - (beam.x + beam.range_m * math.cos(axis))
             else:
                 offset = edge - (beam.y + beam.range_m * math.sin(axis))
-            if abs(offset) > (config.gate_m if gate is None else gate.limit(0 if horizontal else 1)):
+            outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
+            # The wall beyond the box edge, where no wall of the room can be: the estimate has
+            # drifted towards the room's inside.
+            beyond = (
+                gate is not None
+                and config.outside_gate_m > 0.0
+                and offset * outward < -config.gate_m
+                and abs(offset) <= gate.outside_limit(0 if horizontal else 1)
+            )
+            if abs(offset) > (config.gate_m if gate is None else gate.limit(0 if horizontal else 1)) and not beyond:
                 continue
-            if evidence is not None:
+            if evidence is not None and not beyond:
                 hit = (edge, beam.y) if horizontal else (beam.x, edge)
-                outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
                 span = (min_y, max_y) if horizontal else (min_x, max_x)
                 foot = beam.range_m * math.tan(half)
                 if not map_shows_edge(evidence, hit, horizontal, outward, foot, config, span):
