@@ -211,15 +211,18 @@ class DriftGate:
             self.travel = [t + step for t in self.travel]
         self._at = (x, y)
 
+    def _grown(self, axis: int) -> float:
+        """The fixed gate grown by the distance driven along ``axis`` since its last fix [m]."""
+        return self.config.gate_m + self.config.gate_growth * self.travel[axis]
+
     def limit(self, axis: int) -> float:
         """The gate for readings along ``axis`` (0: x, 1: y) [m]."""
-        c = self.config
-        return min(c.max_gate_m, c.gate_m + c.gate_growth * self.travel[axis])
+        return min(self.config.max_gate_m, self._grown(axis))
 
     def outside_limit(self, axis: int) -> float:
         """The gate for readings along ``axis`` that put the wall beyond the box edge [m]."""
         c = self.config
-        return min(max(c.max_gate_m, c.outside_gate_m), c.gate_m + c.gate_growth * self.travel[axis])
+        return min(max(c.max_gate_m, c.outside_gate_m), self._grown(axis))
 
     def fixed(self, axis: int, remaining_m: float) -> None:
         """A fix along ``axis`` that leaves ``remaining_m`` of its offset to later sweeps: the gate
@@ -316,6 +319,7 @@ def box_offsets(
                 offset = edge - (beam.x + beam.range_m * math.cos(axis))
             else:
                 offset = edge - (beam.y + beam.range_m * math.sin(axis))
+            xy = 0 if horizontal else 1
             outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
             # The wall beyond the box edge, where no wall of the room can be: the estimate has
             # drifted towards the room's inside.
@@ -323,9 +327,9 @@ def box_offsets(
                 gate is not None
                 and config.outside_gate_m > 0.0
                 and offset * outward < -config.gate_m
-                and abs(offset) <= gate.outside_limit(0 if horizontal else 1)
+                and abs(offset) <= gate.outside_limit(xy)
             )
-            if abs(offset) > (config.gate_m if gate is None else gate.limit(0 if horizontal else 1)) and not beyond:
+            if abs(offset) > (config.gate_m if gate is None else gate.limit(xy)) and not beyond:
                 continue
             if evidence is not None and not beyond:
                 hit = (edge, beam.y) if horizontal else (beam.x, edge)
@@ -334,7 +338,7 @@ def box_offsets(
                 if not map_shows_edge(evidence, hit, horizontal, outward, foot, config, span):
                     # Past the fixed gate the estimate may have drifted, and the map with it: the map
                     # as it was at the axis's last fix within the gate may show the edge instead.
-                    old = None if trusted is None or abs(offset) <= config.gate_m else trusted[0 if horizontal else 1]
+                    old = None if trusted is None or abs(offset) <= config.gate_m else trusted[xy]
                     if old is None or not map_shows_edge(old, hit, horizontal, outward, foot, config, span):
                         continue
             if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset):
