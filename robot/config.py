@@ -139,7 +139,11 @@ class SimNoise(_Frozen):
 def format_validation_error(source: str, exc: ValidationError) -> str:
     """One line naming the source and every offending field, so that a file with several mistakes
     is fixed in one go."""
-    parts = [f"{'.'.join(str(p) for p in err['loc']) or '(top level)'}: {err['msg']}" for err in exc.errors()]
+    parts = []
+    for err in exc.errors():
+        msg = str(err["msg"]).removeprefix("Value error, ")
+        where = ".".join(str(p) for p in err["loc"])
+        parts.append(f"{where}: {msg}" if where else msg)  # a check across fields names them itself
     return f"{source}: {'; '.join(parts)}"
 
 

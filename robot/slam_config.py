@@ -75,7 +75,7 @@ class SlamConfig(BaseModel):
         if self.resolution < self.logodds.fine_cell_m * 0.999 and self.mapper == "logodds":
             raise ValueError(
                 f"resolution {self.resolution} m is finer than the evidence grid ({self.logodds.fine_cell_m} m); "
-                "lower logodds.fine_cell_m too"
+                "lower fine_cell_m under [slam.logodds] too"
             )
         return self
 
@@ -102,7 +102,9 @@ def slam_config_from_dict(
         return SlamConfig.model_validate(data)
     except ValidationError as exc:
         for err in exc.errors():
-            key = str(err["loc"][0]) if err["loc"] else ""
+            msg = str(err["msg"]).removeprefix("Value error, ")
+            # A check across settings has no field; its message starts with the setting it refuses.
+            key = str(err["loc"][0]) if err["loc"] else next((k for k in given or {} if msg.startswith(f"{k} ")), "")
             if given and key in given:
-                raise ConfigError(f"{key} = {given[key]!r}: {err['msg']}") from None
+                raise ConfigError(f"{key} = {given[key]!r}: {msg}") from None
         raise ConfigError(format_validation_error(source, exc)) from None

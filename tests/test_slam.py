@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -870,9 +871,16 @@ def test_a_far_arm_of_a_large_room_is_mapped_although_the_near_one_settles_long_
     assert result.metrics.f1 >= 0.97
 
 
-def test_config_refuses_settings_that_cannot_work() -> None:
-    with pytest.raises(ConfigError, match="finer than the evidence grid"):
+def test_config_refuses_settings_that_cannot_work(tmp_path: Path) -> None:
+    # A setting given on the command line is named as given, not blamed on the default file.
+    with pytest.raises(ConfigError, match=r"^resolution = 0.03: resolution 0.03 m is finer than the evidence grid"):
         load_run_config(None, {"resolution": 0.03})
+    user = tmp_path / "fine.toml"
+    user.write_text("[slam]\nresolution = 0.03\n")
+    with pytest.raises(ConfigError) as refused:
+        load_run_config(user)
+    assert str(refused.value).startswith(f"{user}: resolution 0.03 m is finer than the evidence grid")
+    assert "Value error" not in str(refused.value) and "top level" not in str(refused.value)
     with pytest.raises(ConfigError, match="smaller than the robot"):
         load_run_config(None, {"resolution": 0.05, "nav_cell_min_m": 0.05})
 
