@@ -27,6 +27,7 @@ from pi_configs import MOTOR_PINS, sim_pi_toml
 from sim_bridge import SimBridge
 
 import server.hardware as service_hardware
+import server.run_body as run_body
 from robot.errors import HardwareError
 from robot.pi.config import PiSetup
 from robot.pi.hardware import PiHardware
@@ -277,6 +278,30 @@ def test_an_imu_that_is_not_an_mpu6050_ends_the_run_as_error(
     robot.who_am_i = None  # with the right chip, the robot can start again
     again = start_run(api)
     assert api.post(f"/api/runs/{again['id']}/stop").json()["status"] == "stopped"
+
+
+def test_a_stop_while_the_run_sets_up_its_engine_ends_as_stopped(
+    service: PiService, motor_states: Any, eventually: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The stop halts the hardware after it has opened and before the engine has read it: the engine's
+    first hardware call fails, and that is the stop, not an error."""
+    api, robot = service.api, service.robot
+    real_engine = run_body.SlamEngine
+    setting_up = threading.Event()
+
+    def engine_after_the_stop(hw: Any, *args: Any, **kwargs: Any) -> Any:
+        setting_up.set()
+        assert eventually(lambda: hw.halted is not None, TIMEOUT_S), "the stop never halted the hardware"
+        return real_engine(hw, *args, **kwargs)
+
+    monkeypatch.setattr(run_body, "SlamEngine", engine_after_the_stop)
+    run_id = start_run(api)["id"]
+    assert setting_up.wait(TIMEOUT_S), "the run never set up its engine"
+    assert api.post(f"/api/runs/{run_id}/stop").json()["status"] == "stopped"
+    run = wait_ended(api, run_id)
+    assert (run["status"], run["terminated_by"], run["error"]) == ("stopped", "stopped", None), run
+    assert robot.hw.halted == "run stopped"
+    assert motor_states() == MOTORS_OFF
 
 
 def stall_while_driving(service: PiService, eventually: Any) -> str:
