@@ -260,16 +260,14 @@ class RunBody:
                     self._checkpoint(recorder)
                     last_checkpoint = time.monotonic()
             status, terminated_by = self._end_status(engine.stats.terminated_by)
-        except HardwareError as exc:
-            if self._halted:  # a stop halted the motors while the run was setting up: it ends as stopped
+        except SonarSlamError as exc:  # an expected failure (a device missing, a bad setting): one line
+            if isinstance(exc, HardwareError) and self._halted:
+                # A stop halted the motors while the run was setting up: it ends as stopped.
                 log.info("run %s stopped while starting (%s)", self.id, exc)
                 status, terminated_by = self._end_status()
             else:
                 log.error("run %s failed: %s: %s", self.id, type(exc).__name__, exc)
                 status, terminated_by, error = "error", "error", f"{type(exc).__name__}: {exc}"
-        except SonarSlamError as exc:  # an expected failure (a device missing, a bad setting): one line
-            log.error("run %s failed: %s: %s", self.id, type(exc).__name__, exc)
-            status, terminated_by, error = "error", "error", f"{type(exc).__name__}: {exc}"
         except Exception as exc:
             log.exception("run %s failed", self.id)
             status, terminated_by, error = "error", "error", f"{type(exc).__name__}: {exc}"
