@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic_core import ErrorDetails
 
 from robot.errors import ConfigError
 
@@ -136,15 +137,21 @@ class SimNoise(_Frozen):
         )
 
 
+def error_message(err: ErrorDetails) -> str:
+    """A validation error's message without pydantic's "Value error, " prefix."""
+    return str(err["msg"]).removeprefix("Value error, ")
+
+
+def error_line(err: ErrorDetails) -> str:
+    """``field.path: message``, or the message alone for a check across fields (it names them itself)."""
+    where = ".".join(str(p) for p in err["loc"])
+    return f"{where}: {error_message(err)}" if where else error_message(err)
+
+
 def format_validation_error(source: str, exc: ValidationError) -> str:
     """One line naming the source and every offending field, so that a file with several mistakes
     is fixed in one go."""
-    parts = []
-    for err in exc.errors():
-        msg = str(err["msg"]).removeprefix("Value error, ")
-        where = ".".join(str(p) for p in err["loc"])
-        parts.append(f"{where}: {msg}" if where else msg)  # a check across fields names them itself
-    return f"{source}: {'; '.join(parts)}"
+    return f"{source}: {'; '.join(error_line(err) for err in exc.errors())}"
 
 
 def read_toml(path: Path) -> dict[str, Any]:

@@ -8,7 +8,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from robot.boxfix import BoxFixConfig
-from robot.config import CONFIG_DIR, RobotConfig, format_validation_error
+from robot.config import CONFIG_DIR, RobotConfig, error_message, format_validation_error
 from robot.errors import ConfigError
 from robot.headingfix import HeadingFixConfig
 from robot.localization import LocalizationConfig
@@ -102,7 +102,7 @@ def slam_config_from_dict(
         return SlamConfig.model_validate(data)
     except ValidationError as exc:
         for err in exc.errors():
-            msg = str(err["msg"]).removeprefix("Value error, ")
+            msg = error_message(err)
             # A check across settings has no field; its message starts with the setting it refuses.
             key = str(err["loc"][0]) if err["loc"] else next((k for k in given or {} if msg.startswith(f"{k} ")), "")
             if given and key in given:

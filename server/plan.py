@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import ValidationError
 
-from robot.config import RobotConfig, SimNoise
+from robot.config import RobotConfig, SimNoise, error_message
 from robot.errors import ConfigError, WorldError
 from robot.grid import GridSpec
 from robot.mapping.base import MapFrame
@@ -80,7 +80,7 @@ def check_noise(base: SimNoise, noise: dict[str, float] | str, loc: list[str | i
     except ValidationError as exc:
         err = exc.errors()[0]
         where = [*loc, *(str(p) for p in err["loc"])]
-        raise field_error(where, str(err["msg"]).removeprefix("Value error, ")) from None
+        raise field_error(where, error_message(err)) from None
 
 
 def robot_for(hardware: str, pi_config_file: Path | None) -> RobotConfig | None:

@@ -15,7 +15,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-from robot.config import CONFIG_DIR
+from robot.config import CONFIG_DIR, error_message
 from robot.errors import ConfigError
 
 SERVER_TOML = CONFIG_DIR / "server.toml"
@@ -122,6 +122,6 @@ def load_settings(**overrides: Any) -> ServerSettings:
     except ValidationError as exc:
         err = exc.errors()[0]
         where = ".".join(str(p) for p in err["loc"]) or "settings"
-        msg = str(err["msg"]).removeprefix("Value error, ")
+        msg = error_message(err)
         got = "" if where == "token" else f" (got {err.get('input')!r})"  # never echo a secret
         raise ConfigError(f"server setting {where}: {msg}{got}") from None

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from robot.config import CONFIG_DIR, RobotConfig, load_robot_config, read_toml
+from robot.config import CONFIG_DIR, RobotConfig, error_line, load_robot_config, read_toml
 from robot.errors import ConfigError
 
 DEFAULT_PI_FILE = CONFIG_DIR / "robot-pi.toml"
@@ -257,10 +257,7 @@ class PiSetup:
 
 def _format_error(source: str, exc: ValidationError) -> str:
     """One line: the file, the offending field (if any) and the message without pydantic's prefix."""
-    err = exc.errors()[0]
-    msg = str(err["msg"]).removeprefix("Value error, ")
-    where = ".".join(str(p) for p in err["loc"])
-    return f"{source}: {where}: {msg}" if where else f"{source}: {msg}"
+    return f"{source}: {error_line(exc.errors()[0])}"
 
 
 def pi_config_from_dict(data: dict[str, Any], source: str = "pi config") -> PiConfig:
