@@ -13,9 +13,13 @@ the gate with the distance driven since an axis's last fix; a reading past the f
 only when the edge's last such readings, taken along a stretch of it, agree on one offset, as a
 drifted estimate makes them, and not on offsets that change along the edge, as an angled wall near
 the edge does. A reading that puts the wall beyond the box edge, where no wall of the room can be,
-says that the estimate has drifted towards the room's inside: its gate grows further
+says that the estimate has drifted towards that wall: its gate grows further
 (``outside_gate_m``), and it needs only that agreement, not the map, which a drifted estimate drew
-with the wall where the drift put it.
+with the wall where the drift put it. A reading that puts the wall inside the edge may be a drift
+away from the wall, or furniture or a slanted wall in front of it; it may do without the map only when
+the estimate can have drifted that far by its own doubt, the map from before the drift showed
+nothing there, and the readings were taken along a long straight stretch in one pass
+(``inside_fix``).
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from robot.config import RobotConfig
 from robot.mapping.base import Evidence, MapFrame
-from robot.mapping.geometry import place_beams
+from robot.mapping.geometry import Beam, place_beams
 from robot.world import Pose
 
 
@@ -51,6 +55,25 @@ class BoxFixConfig(BaseModel):
     # only the agreement along the edge below (the map drawn by a drifted estimate shows the wall
     # where the drift put it, so it cannot confirm the edge; 0 turns this off).
     outside_gate_m: float = Field(default=0.5, ge=0.0)
+    # ... and readings that put the wall inside the box edge past gate_m, which the map so far and the
+    # map at the axis's last fix refuse (the robot reaches a wall for the first time after a long
+    # crossing of open floor, its estimate already drifted away from it): with inside_fix they count
+    # when the axis has had a fix (its map from before the drift shows no face where the readings
+    # put the wall, across inside_seen_band_m), the offset is within inside_sigmas of the drift that
+    # the heading's doubt allows since that fix (``DriftGate.drift``; plus inside_scale of the
+    # distance driven along the axis, for the wheels), and the edge's last inside_readings such
+    # readings were taken in one pass along it over inside_span_m, on a line within inside_rms_m
+    # whose slope is at most inside_max_slope. A slanted wall near a vertex on the edge, or a wall
+    # that bulges towards it, gives readings as flat as a drift's (a beam's nearest echo), so the
+    # drift bound and the map from before are what tell them apart.
+    inside_fix: bool = True
+    inside_sigmas: float = Field(default=3.0, gt=0.0)
+    inside_scale: float = Field(default=0.005, ge=0.0)
+    inside_seen_band_m: tuple[float, float] = (0.01, 0.04)
+    inside_readings: int = Field(default=8, ge=3)
+    inside_span_m: float = Field(default=1.2, ge=0.0)
+    inside_rms_m: float = Field(default=0.015, ge=0.0)
+    inside_max_slope: float = Field(default=0.01, ge=0.0)
     # ... and a reading past gate_m counts only when the edge's last wide_readings such readings span
     # wide_span_m along it and lie on a line within wide_rms_m whose slope is at most wide_max_slope.
     wide_readings: int = Field(default=6, ge=3)
@@ -144,9 +167,11 @@ def edge_supported(
     half_width: float,
     config: BoxFixConfig,
     span: tuple[float, float] | None = None,
+    band: tuple[float, float] | None = None,
 ) -> bool:
     """Whether the evidence shows a wall along the box edge through ``hit`` over +-``half_width``
-    (clipped to ``span``, the edge's own extent along it, when given).
+    (clipped to ``span``, the edge's own extent along it, when given), solid within ``band`` (inside,
+    outside; default ``config.edge_band_m``) of it.
 
     ``horizontal``: the beam runs along x (the edge is a vertical line); ``outward``: +1 or -1, the
     direction out of the box along the beam.
@@ -157,7 +182,8 @@ def edge_supported(
         along = _on_edge(along, hit, horizontal, span)
         if along.size == 0:
             return False
-    across = np.arange(-config.edge_band_m[0], config.edge_band_m[1] + 1e-9, f / 2) * outward
+    inside, outside = config.edge_band_m if band is None else band
+    across = np.arange(-inside, outside + 1e-9, f / 2) * outward
     solid = _solid_near_edge(evidence, hit, horizontal, along, across, config)
     return bool(np.count_nonzero(np.any(solid, axis=1)) / along.size >= config.edge_support)
 
@@ -201,14 +227,25 @@ class DriftGate:
     def __init__(self, config: BoxFixConfig) -> None:
         self.config = config
         self.travel = [0.0, 0.0]  # metres driven since the last fix along x and along y
+        # How far the estimate can have drifted along x and y since the last fix, at one sigma of the
+        # heading's doubt [m]: each step across an axis moves the estimate along it by the step times
+        # the heading error; ``inside_scale`` of each step along it is the wheels' share.
+        self.drift = [0.0, 0.0]
         self._at: tuple[float, float] | None = None
-        self._wide: list[list[tuple[float, float]]] = [[], [], [], []]  # (along, offset) per edge
+        # The edge's last readings past the fixed gate, (along, offset) per edge: those that the
+        # map checks passed, and those that only ``inside_fix`` may count.
+        self._wide: list[list[tuple[float, float]]] = [[], [], [], []]
+        self._inside: list[list[tuple[float, float]]] = [[], [], [], []]
 
-    def follow(self, x: float, y: float, drove: bool = True) -> None:
-        """The estimate is now at (x, y): driven there, or moved there by a fix (``drove`` False)."""
+    def follow(self, x: float, y: float, drove: bool = True, theta_std: float = 0.0) -> None:
+        """The estimate is now at (x, y): driven there with ``theta_std`` [rad] of doubt in its
+        heading, or moved there by a fix (``drove`` False)."""
         if drove and self._at is not None:
-            step = math.hypot(x - self._at[0], y - self._at[1])
+            dx, dy = abs(x - self._at[0]), abs(y - self._at[1])
+            step = math.hypot(dx, dy)
             self.travel = [t + step for t in self.travel]
+            k = self.config.inside_scale
+            self.drift = [self.drift[0] + dy * theta_std + k * dx, self.drift[1] + dx * theta_std + k * dy]
         self._at = (x, y)
 
     def _grown(self, axis: int) -> float:
@@ -231,25 +268,60 @@ class DriftGate:
         c = self.config
         need = abs(remaining_m) + _SPARE_M - c.gate_m
         self.travel[axis] = max(0.0, need) / c.gate_growth if c.gate_growth > 0.0 else 0.0
+        self.drift[axis] = abs(remaining_m) / c.inside_sigmas
 
-    def admits(self, edge: int, along_m: float, offset: float) -> bool:
+    def admits(self, edge: int, along_m: float, offset: float, inside: bool = False) -> bool:
         """Whether a reading of ``edge`` (0-3: max x, min x, max y, min y) at ``along_m`` along it,
-        within ``limit`` and passing the map's checks, counts."""
+        within ``limit`` and passing the map's checks (or, with ``inside``, counted as a drift away
+        from the wall: ``BoxFixConfig.inside_fix``), counts."""
         c = self.config
-        kept = self._wide[edge]
         if abs(offset) <= c.gate_m:
-            kept.clear()
+            self._wide[edge].clear()
+            self._inside[edge].clear()
             return True
+        kept = self._inside[edge] if inside else self._wide[edge]
+        count = c.inside_readings if inside else c.wide_readings
         kept.append((along_m, offset))
-        del kept[: -c.wide_readings]
-        if len(kept) < c.wide_readings:
+        del kept[:-count]
+        if len(kept) < count:
             return False
         at = np.array(kept)
-        if np.ptp(at[:, 0]) < c.wide_span_m:
+        if np.ptp(at[:, 0]) < (c.inside_span_m if inside else c.wide_span_m):
             return False
         slope, intercept = np.polyfit(at[:, 0], at[:, 1], 1)
         rms = float(np.sqrt(np.mean((at[:, 1] - (slope * at[:, 0] + intercept)) ** 2)))
-        return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
+        if not inside:
+            return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
+        # In one pass along the edge, as a robot reaching a wall after a drift drives along it: the
+        # readings of a curved or slanted wall near the edge, taken on the way back and forth past
+        # it, can line up as flat as a drift's.
+        steps = np.diff(at[:, 0])
+        one_pass = bool(np.all(steps >= -1e-9) or np.all(steps <= 1e-9))
+        return one_pass and abs(slope) <= c.inside_max_slope and rms <= c.inside_rms_m
+
+
+def _may_fix_inside(
+    config: BoxFixConfig,
+    gate: DriftGate,
+    axis: int,
+    offset: float,
+    before: Evidence | None,
+    beam: Beam,
+    edge: float,
+    outward: float,
+    foot: float,
+) -> bool:
+    """Whether a reading past the fixed gate that puts the wall inside the box edge, which the maps
+    refuse, may count as a drift away from the wall (``BoxFixConfig.inside_fix``): ``before`` is the
+    map at the axis's last fix within the gate, None if it has had none; ``outward`` (+1 or -1) the
+    direction out of the box along the beam."""
+    if not config.inside_fix or before is None or offset * outward <= config.gate_m:
+        return False
+    if abs(offset) > config.inside_sigmas * gate.drift[axis]:
+        return False
+    horizontal = axis == 0
+    face = (edge - offset, beam.y) if horizontal else (beam.x, edge - offset)
+    return not edge_supported(before, face, horizontal, outward, foot, config, band=config.inside_seen_band_m)
 
 
 def map_shows_edge(
@@ -297,7 +369,7 @@ def box_offsets(
     ``DriftGate``); without it, it is ``config.gate_m``. ``trusted`` holds, per axis, the map as it
     was at that axis's last fix within ``gate_m``: a reading past that gate that the map so far
     refuses counts when that map shows the edge (the map so far may show the wall where the drifted
-    estimate put it).
+    estimate put it), or, when it puts the wall inside the edge, as ``BoxFixConfig.inside_fix`` says.
     """
     if frame.extent is None or not config.enabled:
         return None, None
@@ -320,9 +392,10 @@ def box_offsets(
             else:
                 offset = edge - (beam.y + beam.range_m * math.sin(axis))
             xy = 0 if horizontal else 1
+            inside = False  # refused by the maps, counted as a drift away from the wall (``inside_fix``)
             outward = 1.0 if target in (0.0, math.pi / 2) else -1.0
             # The wall beyond the box edge, where no wall of the room can be: the estimate has
-            # drifted towards the room's inside.
+            # drifted towards that wall.
             beyond = (
                 gate is not None
                 and config.outside_gate_m > 0.0
@@ -340,8 +413,12 @@ def box_offsets(
                     # as it was at the axis's last fix within the gate may show the edge instead.
                     old = None if trusted is None or abs(offset) <= config.gate_m else trusted[xy]
                     if old is None or not map_shows_edge(old, hit, horizontal, outward, foot, config, span):
-                        continue
-            if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset):
+                        inside = gate is not None and _may_fix_inside(
+                            config, gate, xy, offset, old, beam, edge, outward, foot
+                        )
+                        if not inside:
+                            continue
+            if gate is not None and not gate.admits(index, beam.y if horizontal else beam.x, offset, inside):
                 continue
             (dxs if horizontal else dys).append(offset)
     return (_median(dxs) if dxs else None), (_median(dys) if dys else None)

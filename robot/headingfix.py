@@ -163,7 +163,7 @@ class WallFixes:
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
         """The pose after this sweep's fixes (``pose`` itself when there are none)."""
-        self.gate.follow(pose.x, pose.y)
+        self.gate.follow(pose.x, pose.y, theta_std=dr.estimate.theta_std)
         ox, oy = box_offsets(
             self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate, (self._trusted[0], self._trusted[1])
         )

@@ -32,7 +32,7 @@ BARS = {
     "ring": (0.94, 0.97),
     "lhall": (0.94, 0.97),
     "cornered": (0.93, 0.90),
-    "openhall": (0.80, 0.90),
+    "openhall": (0.93, 0.95),
     "pentagon": (0.94, 0.92),
     "heptagon": (0.93, 0.90),
     "roundroom": (0.86, 0.78),
