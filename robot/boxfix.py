@@ -16,8 +16,8 @@ the edge does. A reading that puts the wall beyond the box edge, where no wall o
 says that the estimate has drifted towards that wall: its gate grows further
 (``outside_gate_m``), and it needs only that agreement, not the map, which a drifted estimate drew
 with the wall where the drift put it. A reading that puts the wall inside the edge may be a drift
-away from the wall, or furniture or a slanted wall in front of it; it may do without the map only when
-the estimate can have drifted that far by its own doubt, the map from before the drift showed
+away from the wall, or furniture or a slanted wall in front of it; it may do without the map only
+when the estimate can have drifted that far by its own doubt, the map from before the drift showed
 nothing there, and the readings were taken along a long straight stretch in one pass
 (``inside_fix``).
 """
@@ -32,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from robot.config import RobotConfig
 from robot.mapping.base import Evidence, MapFrame
-from robot.mapping.geometry import Beam, place_beams
+from robot.mapping.geometry import place_beams
 from robot.world import Pose
 
 
@@ -288,39 +288,40 @@ class DriftGate:
         at = np.array(kept)
         if np.ptp(at[:, 0]) < (c.inside_span_m if inside else c.wide_span_m):
             return False
+        if inside:
+            # In one pass along the edge, as a robot reaching a wall after a drift drives along it:
+            # the readings of a curved or slanted wall near the edge, taken on the way back and forth
+            # past it, can line up as flat as a drift's.
+            steps = np.diff(at[:, 0])
+            if not (np.all(steps >= -1e-9) or np.all(steps <= 1e-9)):
+                return False
         slope, intercept = np.polyfit(at[:, 0], at[:, 1], 1)
         rms = float(np.sqrt(np.mean((at[:, 1] - (slope * at[:, 0] + intercept)) ** 2)))
-        if not inside:
-            return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
-        # In one pass along the edge, as a robot reaching a wall after a drift drives along it: the
-        # readings of a curved or slanted wall near the edge, taken on the way back and forth past
-        # it, can line up as flat as a drift's.
-        steps = np.diff(at[:, 0])
-        one_pass = bool(np.all(steps >= -1e-9) or np.all(steps <= 1e-9))
-        return one_pass and abs(slope) <= c.inside_max_slope and rms <= c.inside_rms_m
+        if inside:
+            return abs(slope) <= c.inside_max_slope and rms <= c.inside_rms_m
+        return abs(slope) <= c.wide_max_slope and rms <= c.wide_rms_m
 
 
 def _may_fix_inside(
     config: BoxFixConfig,
     gate: DriftGate,
-    axis: int,
     offset: float,
     before: Evidence | None,
-    beam: Beam,
-    edge: float,
+    hit: tuple[float, float],
+    horizontal: bool,
     outward: float,
     foot: float,
 ) -> bool:
-    """Whether a reading past the fixed gate that puts the wall inside the box edge, which the maps
-    refuse, may count as a drift away from the wall (``BoxFixConfig.inside_fix``): ``before`` is the
-    map at the axis's last fix within the gate, None if it has had none; ``outward`` (+1 or -1) the
-    direction out of the box along the beam."""
+    """Whether a reading past the fixed gate that puts the wall ``offset`` inside the box edge at
+    ``hit``, which the maps refuse, may count as a drift away from the wall
+    (``BoxFixConfig.inside_fix``): ``before`` is the map at the axis's last fix within the gate, None
+    if it has had none; ``outward`` (+1 or -1) the direction out of the box along the beam."""
     if not config.inside_fix or before is None or offset * outward <= config.gate_m:
         return False
+    axis = 0 if horizontal else 1
     if abs(offset) > config.inside_sigmas * gate.drift[axis]:
         return False
-    horizontal = axis == 0
-    face = (edge - offset, beam.y) if horizontal else (beam.x, edge - offset)
+    face = (hit[0] - offset, hit[1]) if horizontal else (hit[0], hit[1] - offset)
     return not edge_supported(before, face, horizontal, outward, foot, config, band=config.inside_seen_band_m)
 
 
@@ -414,7 +415,7 @@ def box_offsets(
                     old = None if trusted is None or abs(offset) <= config.gate_m else trusted[xy]
                     if old is None or not map_shows_edge(old, hit, horizontal, outward, foot, config, span):
                         inside = gate is not None and _may_fix_inside(
-                            config, gate, xy, offset, old, beam, edge, outward, foot
+                            config, gate, offset, old, hit, horizontal, outward, foot
                         )
                         if not inside:
                             continue
