@@ -39,8 +39,8 @@ class MapMetrics:
 def error_ratio(cell_errors: int, non_vacant: int, total_cells: int, t_avg: float | None = None) -> float:
     """The paper's ``(E / N) * (T / T_avg)``; ``t_avg`` defaults to ``total_cells`` (one map alone).
 
-    A truth with no non-vacant cell (N = 0) cannot occur for a walled room; it is scored as if
-    N = 1 so that the ratio stays finite and JSON-safe (0.0 when there are no errors).
+    A truth with no non-vacant cell (N = 0: a box room whose walls all lie on the grid's edges) is
+    scored as if N = 1, so that the ratio stays finite and JSON-safe (0.0 when there are no errors).
     """
     if t_avg is None:
         t_avg = total_cells
