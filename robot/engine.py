@@ -99,7 +99,7 @@ class SlamEngine:
             lambda: self.dead_reckoning.distance_m,
             keep=repairs_possible(frame, config.box_fix),
         )
-        self.fixes = WallFixes(frame, robot, config.box_fix, config.heading_fix)
+        self.fixes = WallFixes(frame, robot, config.box_fix, config.heading_fix, config.line_fix)
         self._user_tick = on_tick
         self._last_body_xy = (frame.start.x, frame.start.y)
         self.recorder = recorder

@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from robot.boxfix import BoxFixConfig, DriftGate, box_offsets, map_shows_edge
 from robot.config import RobotConfig
+from robot.linefix import LineFixConfig, LineFixes
 from robot.localization import DeadReckoning
 from robot.mapping.base import Evidence, MapFrame
 from robot.mapping.journal import Repair
@@ -146,10 +147,18 @@ def repairs_possible(frame: MapFrame, box: BoxFixConfig) -> bool:
 
 
 class WallFixes:
-    """Position and heading fixes from one sweep's echoes off the room box, applied to the dead
-    reckoning; the engine and the replay of a log call it alike."""
+    """Position and heading fixes from one sweep's echoes off the room box, and position fixes off
+    the walls the robot mapped itself (``robot.linefix``: in a room of unknown size, or when asked
+    for), applied to the dead reckoning; the engine and the replay of a log call it alike."""
 
-    def __init__(self, frame: MapFrame, robot: RobotConfig, box: BoxFixConfig, heading: HeadingFixConfig) -> None:
+    def __init__(
+        self,
+        frame: MapFrame,
+        robot: RobotConfig,
+        box: BoxFixConfig,
+        heading: HeadingFixConfig,
+        line: LineFixConfig | None = None,
+    ) -> None:
         self.frame = frame
         self.robot = robot
         self.box = box
@@ -160,13 +169,32 @@ class WallFixes:
         self._fixed_at = [0.0, 0.0]  # the odometer at each axis's last fix within the fixed gate [m]
         self._repairs: list[Repair] = []
         self._trusted: list[Evidence | None] = [None, None]  # the map at each axis's last fix within the gate
+        known = frame.extent is not None
+        wanted = line is not None and line.enabled and (line.with_known_box or not known)
+        self.lines = LineFixes(robot, line, box_known=known) if line is not None and wanted else None
+        self._box_idle = [0, 0]  # sweeps since each axis's last box fix
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:
-        """The pose after this sweep's fixes (``pose`` itself when there are none)."""
+        """The pose after this sweep's fixes (``pose`` itself when there are none): the box's, then
+        the landmark walls' (``robot.linefix``)."""
+        pose = self._apply_box(dr, pose, ranges_m, evidence)
+        if self.lines is not None:
+            shift = self.lines.offset(pose, ranges_m)
+            if shift is not None:
+                est = dr.shift_position(*shift)
+                self.gate.follow(est.x, est.y, drove=False)
+                pose = est.as_pose()
+            self.lines.observe(pose, ranges_m, max(self._box_idle))
+        return pose
+
+    def _apply_box(
+        self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None
+    ) -> Pose:
         self.gate.follow(pose.x, pose.y, theta_std=dr.estimate.theta_std)
         ox, oy = box_offsets(
             self.frame, self.robot, pose, ranges_m, self.box, evidence, self.gate, (self._trusted[0], self._trusted[1])
         )
+        self._box_idle = [0 if o is not None else n + 1 for o, n in zip((ox, oy), self._box_idle, strict=True)]
         if ox is None and oy is None:
             return pose
         shift = [0.0, 0.0]

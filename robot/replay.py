@@ -199,7 +199,7 @@ def replay_sensor_log(
     first = next(records, None)
     records = itertools.chain([first] if first is not None else [], records)
     dr = DeadReckoning(robot, frame.start, slam.localization)
-    fixes = WallFixes(frame, robot, slam.box_fix, slam.heading_fix)
+    fixes = WallFixes(frame, robot, slam.box_fix, slam.heading_fix, slam.line_fix)
     mapper = JournaledMapper(
         lambda: make_mapper(slam.mapper, frame, robot, slam),
         lambda: dr.distance_m,

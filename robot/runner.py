@@ -165,6 +165,7 @@ def simulate(
             "collisions": sim.collisions,
             "failed_moves": engine.stats.failed_moves,
             "heading_fixes": len(engine.fixes.heading_fixes),
+            "line_fixes": 0 if engine.fixes.lines is None else engine.fixes.lines.fixes,
             "bump_fixes": engine.fixes.contact_fixes,
             "map_repairs": engine.mapper.repairs,
             "sweeps": engine.stats.sweeps,

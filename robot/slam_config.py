@@ -11,6 +11,7 @@ from robot.boxfix import BoxFixConfig
 from robot.config import CONFIG_DIR, RobotConfig, error_message, format_validation_error
 from robot.errors import ConfigError
 from robot.headingfix import HeadingFixConfig
+from robot.linefix import LineFixConfig
 from robot.localization import LocalizationConfig
 from robot.mapping.logodds import LogOddsParams
 from robot.motion import MotionConfig
@@ -64,6 +65,7 @@ class SlamConfig(BaseModel):
     localization: LocalizationConfig = LocalizationConfig()
     box_fix: BoxFixConfig = BoxFixConfig()
     heading_fix: HeadingFixConfig = HeadingFixConfig()
+    line_fix: LineFixConfig = LineFixConfig()
 
     def nav_block(self, robot: RobotConfig) -> int:
         """Map cells per navigation-cell side: enough to hold the body and its turning circle."""

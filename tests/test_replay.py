@@ -78,6 +78,19 @@ def test_the_log_carries_the_engines_numbers_exactly(recorded_run: Path) -> None
     assert drift <= 0.5e-4 + 1e-9, f"replayed pose is {drift:.2g} off the engine's: the log rounds its numbers"
 
 
+def test_a_run_with_fixes_from_its_own_walls_replays_cell_for_cell(tmp_path: Path) -> None:
+    """Landmark walls found during the run (``robot.linefix``) fix the position in the replay of
+    its log at the same sweeps."""
+    config = tmp_path / "lines.toml"
+    config.write_text("[slam.line_fix]\nwith_known_box = true\n")
+    world = str(Path(__file__).parent / "data" / "worlds" / "tri.toml")
+    assert main(["run", "--world", world, "--config", str(config), "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["line_fixes"] >= 10
+    replay = ["replay", str(tmp_path / "run" / "sensors.log"), "--config", str(config)]
+    assert main([*replay, "--out", str(tmp_path / "replay")]) == 0
+    assert np.array_equal(read_csv(tmp_path / "replay" / "map.csv"), read_csv(tmp_path / "run" / "map.csv"))
+
+
 def test_a_run_whose_map_was_repaired_replays_cell_for_cell(tmp_path: Path) -> None:
     """The hall's seed 2 drifts past the fixes' fixed gate, and a fix past it rebuilds the map at
     corrected poses (``robot.mapping.journal``): the replay of its log must do the same. (Without
