@@ -170,8 +170,9 @@ class WallFixes:
         self._repairs: list[Repair] = []
         self._trusted: list[Evidence | None] = [None, None]  # the map at each axis's last fix within the gate
         known = frame.extent is not None
-        wanted = line is not None and line.enabled and (line.with_known_box or not known)
-        self.lines = LineFixes(robot, line, box_known=known) if line is not None and wanted else None
+        self.lines: LineFixes | None = None
+        if line is not None and line.enabled and (line.with_known_box or not known):
+            self.lines = LineFixes(robot, line, box_known=known)
         self._box_idle = [0, 0]  # sweeps since each axis's last box fix
 
     def apply(self, dr: DeadReckoning, pose: Pose, ranges_m: NDArray[np.float64], evidence: Evidence | None) -> Pose:

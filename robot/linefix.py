@@ -124,13 +124,12 @@ class LineFixes:
                 expected = -line.depth_at(beam.x, beam.y)  # the transducer's distance to the wall
                 if expected <= 0.0:
                     continue
-                nx, ny = math.cos(line.theta), math.sin(line.theta)
-                along = line.along(beam.x + expected * nx, beam.y + expected * ny)
-                if not line.s0 + c.end_margin_m <= along <= line.s1 - c.end_margin_m:
+                # The foot of the perpendicular lies where the transducer does along the wall.
+                if not line.s0 + c.end_margin_m <= line.along(beam.x, beam.y) <= line.s1 - c.end_margin_m:
                     continue
                 error = expected - beam.range_m
                 if abs(error) <= c.gate_m and (best is None or abs(error) < best[0]):
-                    best = (abs(error), nx, ny, error)
+                    best = (abs(error), math.cos(line.theta), math.sin(line.theta), error)
             if best is not None:
                 normals.append((best[1], best[2]))
                 errors.append(best[3])
