@@ -1530,6 +1530,36 @@ def test_a_wall_reached_after_a_drift_away_from_it_fixes_the_drift_where_nothing
     assert drive(BoxFixConfig(), ys=zigzag) == pytest.approx(1.42)
 
 
+def test_a_drift_away_from_a_wall_read_in_one_pass_may_slope_by_the_headings_doubt() -> None:
+    """Driving along a wall with the heading off by delta, the estimate drifts across the wall by
+    delta per metre: a drift's readings in one pass lie on a line of that slope, not a flat one. A
+    slope within ``inside_slope_sigmas`` of the heading's doubt counts; past it, or with the heading
+    well known, only ``inside_max_slope`` does. And a pass over seven cells spans 1.2 m between
+    estimated positions that the cell centres put a centimetre either side of their places
+    (``span_slack_m``). In an 8.4 x 5.3 m hall the estimate ran 8 cm off the east wall, away from
+    it, with the heading 1 degree off, and the wall was mapped a column in (F1 0.904; 1.000 with
+    these)."""
+    from robot.boxfix import BoxFixConfig, DriftGate
+
+    # A pass down the east wall: the robot approaches at y = 1.3 (two readings there), then drives
+    # south a cell at a time; the offsets grow by 1.7 cm a metre, the last one 1.1976 m from the first.
+    along = [1.3, 1.3, 1.102, 0.903, 0.701, 0.503, 0.302, 0.102]
+    offsets = [0.077 + 0.017 * (1.3 - a) for a in along]
+
+    def counts(theta_std_deg: float, **settings: float) -> bool:
+        gate = DriftGate(BoxFixConfig(**settings))
+        gate.follow(8.1, 1.3, theta_std=math.radians(theta_std_deg))
+        return [gate.admits(0, a, o, inside=True) for a, o in zip(along, offsets, strict=True)][-1]
+
+    assert counts(0.65, inside_slope_sigmas=2.0, span_slack_m=0.01)
+    assert not counts(0.65, inside_slope_sigmas=0.0, span_slack_m=0.01)  # 1.7 cm a metre > 1 cm
+    assert not counts(0.4, inside_slope_sigmas=2.0, span_slack_m=0.01)  # 2 sigma is 1.4 cm a metre
+    assert not counts(0.65, inside_slope_sigmas=2.0, span_slack_m=0.0)  # 2.4 mm short of 1.2 m
+    # Flat readings count as before, whatever the heading's doubt.
+    offsets = [0.077] * len(along)
+    assert counts(0.0, inside_slope_sigmas=2.0, span_slack_m=0.01)
+
+
 def test_a_repair_rebuilds_the_map_at_poses_corrected_in_proportion_to_the_distance_driven() -> None:
     from robot.mapping.journal import JournaledMapper, Repair
 
@@ -1590,6 +1620,33 @@ def test_a_drifted_estimate_and_its_map_are_put_right_in_a_large_hall() -> None:
     assert repaired.extra["map_repairs"] >= 1 and kept.extra["map_repairs"] == 0
     assert repaired.metrics.f1 >= 0.95
     assert repaired.metrics.f1 >= kept.metrics.f1 + 0.05
+
+
+def test_a_hall_whose_heading_drifted_finds_its_east_wall_on_the_box_edge() -> None:
+    """An 8.4 x 5.3 m hall (a generated furnished room, seed 0): the heading drifts a degree while
+    the robot works the west half, and the estimate reaches the east wall 8 cm away from it. Its
+    readings along the wall slope by the heading error, which the heading's doubt allows
+    (``inside_slope_sigmas``), and the fix comes there; without it, the wall was mapped a column in
+    for the rest of the run."""
+    room = {
+        "name": "hall-drift",
+        "boundary": [[8.4, 0.0], [8.4, 5.3], [0.0, 5.3], [0.0, 0.0]],
+        "start": {"x": 3.25, "y": 1.65, "theta_deg": 48.0},
+        "obstacles": [
+            {"shape": "polygon", "points": [[3.35, 2.67], [3.11, 2.93], [2.78, 2.81], [2.8, 2.4], [3.21, 2.35]]},
+            {"shape": "rect", "center": [5.9, 0.225], "size": [0.8, 0.55], "angle_deg": 0.0},
+        ],
+    }
+    world = world_from_dict(room, "hall-drift.toml")
+    cfg = load_run_config()
+    fixed = simulate(world, cfg.robot, cfg.noise, cfg.slam, seed=0)
+    flat = cfg.slam.box_fix.model_copy(update={"inside_slope_sigmas": 0.0})
+    drifted = simulate(world, cfg.robot, cfg.noise, cfg.slam.model_copy(update={"box_fix": flat}), seed=0)
+    east = fixed.truth[:, -1] == FREE  # the column along the east wall is floor
+    assert (fixed.states[east, -1] == FREE).all()
+    assert (drifted.states[east, -1] == OCCUPIED).sum() >= 5
+    assert fixed.metrics.f1 >= 0.98 and drifted.metrics.f1 < 0.95
+    assert fixed.final_xy_error_m < 0.05
 
 
 def test_an_occupied_cell_between_the_explored_area_and_unknown_space_gets_a_closer_look() -> None:
