@@ -252,7 +252,7 @@ class DriftGate:
 
     def follow(self, x: float, y: float, drove: bool = True, theta_std: float = 0.0) -> None:
         """The estimate is now at (x, y): driven there with ``theta_std`` [rad] of doubt in its
-        heading, or moved there by a fix (``drove`` False)."""
+        heading (kept for ``admits``), or moved there by a fix (``drove`` False)."""
         if drove:
             self.theta_std = theta_std
         if drove and self._at is not None:

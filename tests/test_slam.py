@@ -1555,7 +1555,7 @@ def test_a_drift_away_from_a_wall_read_in_one_pass_may_slope_by_the_headings_dou
     assert not counts(0.65, inside_slope_sigmas=0.0, span_slack_m=0.01)  # 1.7 cm a metre > 1 cm
     assert not counts(0.4, inside_slope_sigmas=2.0, span_slack_m=0.01)  # 2 sigma is 1.4 cm a metre
     assert not counts(0.65, inside_slope_sigmas=2.0, span_slack_m=0.0)  # 2.4 mm short of 1.2 m
-    # Flat readings count as before, whatever the heading's doubt.
+    # Flat readings count as before, with no doubt in the heading at all.
     offsets = [0.077] * len(along)
     assert counts(0.0, inside_slope_sigmas=2.0, span_slack_m=0.01)
 
