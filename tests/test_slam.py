@@ -1560,6 +1560,28 @@ def test_a_drift_away_from_a_wall_read_in_one_pass_may_slope_by_the_headings_dou
     assert counts(0.0, inside_slope_sigmas=2.0, span_slack_m=0.01)
 
 
+def test_inside_readings_near_where_the_edge_was_last_on_the_box_are_a_wall_leaving_it() -> None:
+    """A wall that leans off a box edge from a vertex on it reads on the edge there and a few
+    centimetres inside it further along: readings that put the wall inside the edge within
+    ``inside_clear_m`` along it of the edge's last reading within the fixed gate are not a drift."""
+    from robot.boxfix import BoxFixConfig, DriftGate
+
+    along = [2.1, 2.3, 2.5, 2.7, 2.9, 3.1, 3.3, 3.5, 3.7]  # a pass up the west edge, one pass
+    offsets = [-0.065] * len(along)  # flat, as a drift's would be
+
+    def counts(last_on_edge: float | None, **settings: float) -> bool:
+        gate = DriftGate(BoxFixConfig(**settings))
+        gate.follow(0.3, 1.7, theta_std=math.radians(0.9))
+        if last_on_edge is not None:
+            assert gate.admits(1, last_on_edge, -0.02)  # within the fixed gate: on the edge
+        return [gate.admits(1, a, o, inside=True) for a, o in zip(along, offsets, strict=True)][-1]
+
+    assert not counts(1.7)  # on the edge 0.4 m from the first reading
+    assert counts(1.7, inside_clear_m=0.0)
+    assert counts(1.3)  # 0.8 m away: as far as these readings go, a drift
+    assert counts(None)
+
+
 def test_a_repair_rebuilds_the_map_at_poses_corrected_in_proportion_to_the_distance_driven() -> None:
     from robot.mapping.journal import JournaledMapper, Repair
 
