@@ -22,6 +22,7 @@ from robot.headingfix import WallFixes, repairs_possible
 from robot.localization import DeadReckoning, PoseEstimate
 from robot.mapping import make_mapper
 from robot.mapping.base import MapFrame, blocked_by_extent
+from robot.mapping.geometry import place_beams
 from robot.mapping.journal import JournaledMapper
 from robot.motion import Pilot
 from robot.sensorlog import SensorLogWriter
@@ -155,6 +156,13 @@ class SlamEngine:
         self.mapper.repair(self.fixes.take_repairs())
         self.mapper.integrate(pose, sweep.ranges_m)
         self.mapper.mark_body(pose)
+        beams = place_beams(pose, sweep.ranges_m, self.robot)
+        self.explorer.note_view(
+            pose.x,
+            pose.y,
+            [b.axis_rad for b in beams],
+            [math.hypot(b.x - pose.x, b.y - pose.y) + b.range_m if b.echo else math.inf for b in beams],
+        )
         self.last_sweep = sweep.ranges_m
         self.stats.sweeps += 1
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Container, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -67,6 +67,11 @@ class Explorer:
     probe_min_cells: int = 4  # ... to traversable floor beyond with at least this many navigation cells
     probe_free_fraction: float = 0.9  # ... seen free over this share
     probed: set[tuple[int, int]] = field(default_factory=set)
+    # A beam within this of one of the 8 directions, from a navigation cell, looks along it ...
+    view_tolerance_deg: float = 10.0
+    # ... and sees through the next cell when its echo (from the robot's centre) is at least this
+    # many steps away, or it hears none (see ``note_view``).
+    view_steps: float = 2.5
     _around_reach_cache: tuple[tuple[NDArray[np.bool_], tuple[int, int]], NDArray[np.bool_]] | None = field(
         default=None, init=False, repr=False, compare=False
     )
@@ -76,6 +81,10 @@ class Explorer:
         self.nav_cols = -(-self.grid.cols // self.block)
         self.visited = np.zeros((self.nav_rows, self.nav_cols), dtype=bool)
         self.bumped = np.zeros_like(self.visited)
+        # Per navigation cell and direction (CLOCKWISE), the beams from it that saw through the next
+        # cell in that direction, and those that did not.
+        self.views_open = np.zeros((self.nav_rows, self.nav_cols, 8), dtype=np.int32)
+        self.views_shut = np.zeros_like(self.views_open)
 
     # -- geometry -------------------------------------------------------------------------------
     def nav_center(self, cell: tuple[int, int]) -> tuple[float, float]:
@@ -123,6 +132,31 @@ class Explorer:
         trav = self.traversable(free_fraction)
         trav[current] = True  # the robot is standing in it
         return trav
+
+    def note_view(self, x: float, y: float, axes_rad: Iterable[float], reaches_m: Iterable[float]) -> None:
+        """Record a sweep taken at (x, y): each beam's axis and how far from (x, y) its echo lies
+        (``math.inf`` when it heard none). A beam within ``view_tolerance_deg`` of one of the 8
+        directions sees through the next cell that way when nothing echoed within ``view_steps``
+        steps."""
+        cell = self.nav_cell_of(x, y)
+        if not (0 <= cell[0] < self.nav_rows and 0 <= cell[1] < self.nav_cols):
+            return
+        tolerance = math.radians(self.view_tolerance_deg)
+        step = self.block * self.grid.resolution
+        for axis, reach in zip(axes_rad, reaches_m, strict=True):
+            k = direction_index(axis)
+            off = math.remainder(axis - direction_heading(k), math.tau)
+            if abs(off) > tolerance:
+                continue
+            need = self.view_steps * step * (math.sqrt(2.0) if k % 2 else 1.0)
+            if reach >= need:
+                self.views_open[cell[0], cell[1], k] += 1
+            else:
+                self.views_shut[cell[0], cell[1], k] += 1
+
+    def _sees_through(self, cell: tuple[int, int], k: int) -> bool:
+        """Whether every beam from ``cell`` along direction ``k`` saw through the next cell."""
+        return bool(self.views_open[cell[0], cell[1], k] > 0 and self.views_shut[cell[0], cell[1], k] == 0)
 
     # -- decisions -------------------------------------------------------------------------------
     def _can_step(
@@ -323,14 +357,22 @@ class Explorer:
         (``probe_cells``: no bump, nothing past the room box; the rest of it is not occupied), it has
         not been probed, and the cell
         beyond it in the same straight line is traversable but cannot be reached, and joins at least
-        ``probe_min_cells`` such cells (more than a pocket behind furniture). Driving in either
-        arrives (the body clears the cell) or stalls (the cell is marked bumped); at most
-        ``max_probes`` a run, nearest first."""
-        if len(self.probed) >= self.max_probes or not probe_cells.any():
+        ``probe_min_cells`` such cells (more than a pocket behind furniture).
+
+        A cell qualifies too, whether echoes hold it occupied or it is unknown, when every beam
+        along that line from the cell beside it saw through it (``note_view``), and the cell beyond
+        lies in unknown space not beside anywhere the robot can get to: a gap a cell wide beside a
+        bin in a corridor longer than the sonar's range, whose beams hear nothing and clear nothing.
+
+        Driving in either arrives (the body clears the cell) or stalls (the cell is marked bumped);
+        at most ``max_probes`` a run, nearest first."""
+        if len(self.probed) >= self.max_probes or not (probe_cells.any() or self.views_open.any()):
             return None
         # Past the grid counts as wall.
         echoed = self._nav_blocks(probe_cells, False).any(axis=(1, 3))
-        clear = self._nav_blocks(probe_cells | (free_fraction >= 0.0), False).all(axis=(1, 3))
+        clear: NDArray[np.bool_] = np.asarray(
+            self._nav_blocks(probe_cells | (free_fraction >= 0.0), False).all(axis=(1, 3))
+        )
         has_probe: NDArray[np.bool_] = np.logical_and(echoed, clear)
         nothing = np.zeros_like(self.visited)
         no_goal = np.zeros(self.grid.shape, dtype=bool)
@@ -344,15 +386,18 @@ class Explorer:
         for cell in known:
             beyond[cell] = False
         for cell in reached:
-            for d in CLOCKWISE[::2]:
+            for k in range(0, 8, 2):
+                d = CLOCKWISE[k]
                 p = (cell[0] + d[0], cell[1] + d[1])
                 q = (cell[0] + 2 * d[0], cell[1] + 2 * d[1])
                 if not (0 <= q[0] < self.nav_rows and 0 <= q[1] < self.nav_cols):
                     continue
-                if trav[p] or self.bumped[p] or p in self.probed or not has_probe[p]:
+                if trav[p] or self.bumped[p] or p in self.probed or not clear[p]:
                     continue
-                if not beyond[q] or not self._floor_beyond(beyond, seen_free, q):
-                    continue
+                if has_probe[p] and beyond[q] and self._floor_beyond(beyond, seen_free, q):
+                    pass  # echoes close a gap to floor seen free
+                elif self.visited[p] or not self._sees_through(cell, k) or self._beside(q, known):
+                    continue  # (a cell the beams from beside it saw through, to space not yet in reach)
                 step = p
                 if cell != current:
                     step = cell
@@ -360,6 +405,10 @@ class Explorer:
                         step = reached[step]
                 return step, p
         return None
+
+    def _beside(self, cell: tuple[int, int], cells: Container[tuple[int, int]]) -> bool:
+        """Whether ``cell`` or one of its 8 neighbours is among ``cells``."""
+        return any((cell[0] + dr, cell[1] + dc) in cells for dr in (-1, 0, 1) for dc in (-1, 0, 1))
 
     def _floor_beyond(self, beyond: NDArray[np.bool_], seen_free: NDArray[np.bool_], start: tuple[int, int]) -> bool:
         """Whether the cells of ``beyond`` joined to ``start`` hold at least ``probe_min_cells``
