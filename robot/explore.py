@@ -91,8 +91,8 @@ class Explorer:
         self.nav_cols = -(-self.grid.cols // self.block)
         self.visited = np.zeros((self.nav_rows, self.nav_cols), dtype=bool)
         self.bumped = np.zeros_like(self.visited)
-        # Per navigation cell and direction (CLOCKWISE), the beams from it that saw through the next
-        # cell in that direction, and those that did not.
+        # Per navigation cell and direction (CLOCKWISE; the straight ones only), the beams from it that
+        # saw through the next cell in that direction, and those that did not.
         self.views_open = np.zeros((self.nav_rows, self.nav_cols, 8), dtype=np.int32)
         self.views_shut = np.zeros_like(self.views_open)
 
@@ -145,9 +145,9 @@ class Explorer:
 
     def note_view(self, x: float, y: float, axes_rad: Iterable[float], reaches_m: Iterable[float]) -> None:
         """Record a sweep taken at (x, y): each beam's axis and how far from (x, y) its echo lies
-        (``math.inf`` when it heard none). A beam within ``view_tolerance_deg`` of one of the 8
-        directions sees through the next cell that way when it heard no echo, and not when it heard
-        one within ``view_steps`` steps."""
+        (``math.inf`` when it heard none). A beam within ``view_tolerance_deg`` of one of the 4
+        straight directions (the only ones ``probe`` looks along) sees through the next cell that way
+        when it heard no echo, and not when it heard one within ``view_steps`` steps."""
         cell = self.nav_cell_of(x, y)
         if not (0 <= cell[0] < self.nav_rows and 0 <= cell[1] < self.nav_cols):
             return
@@ -156,12 +156,11 @@ class Explorer:
         for axis, reach in zip(axes_rad, reaches_m, strict=True):
             k = direction_index(axis)
             off = math.remainder(axis - direction_heading(k), math.tau)
-            if abs(off) > tolerance:
+            if k % 2 or abs(off) > tolerance:
                 continue
-            need = self.view_steps * step * (math.sqrt(2.0) if k % 2 else 1.0)
             if math.isinf(reach):
                 self.views_open[cell[0], cell[1], k] += 1
-            elif reach < need:
+            elif reach < self.view_steps * step:
                 self.views_shut[cell[0], cell[1], k] += 1
 
     def _sees_through(self, cell: tuple[int, int], k: int) -> bool | None:
@@ -421,17 +420,15 @@ class Explorer:
                     continue
                 if trav[p] or self.bumped[p] or p in self.probed or not clear[p]:
                     continue
-                look = False
-                if has_probe[p] and beyond[q] and self._floor_beyond(beyond, seen_free, q):
-                    pass  # echoes close a gap to floor seen free
-                else:  # a cell the beams from beside it saw through, to space not yet in reach
+                if not (has_probe[p] and beyond[q] and self._floor_beyond(beyond, seen_free, q)):
+                    # Not echoes closing a gap to floor seen free: a cell the beams from beside it
+                    # saw through, to space not yet in reach?
                     far = not see_through or self.visited[p] or self._beside(q, known)
                     seen = False if far else self._sees_through(cell, k)
                     if seen is False:
                         continue
-                    look = seen is None
-                if look:
-                    self.pending_look = (cell, k)
+                    if seen is None:
+                        self.pending_look = (cell, k)
                 step = p
                 if cell != current:
                     step = cell
